@@ -1,0 +1,32 @@
+"""Argument checks shared by the core: finite values and explicit shapes, with errors that name
+the argument and the expected form."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def as_finite_array(value, name: str, *, ndim: tuple[int, ...] | None = None) -> np.ndarray:
+    """Return ``value`` as a float64 array, raising ``ValueError`` naming ``name`` when it is not
+    numeric, not finite, or has a number of dimensions outside ``ndim``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be a real numeric array; got {type(value).__name__}") from err
+    if ndim is not None and arr.ndim not in ndim:
+        forms = " or ".join(f"{n}-D" for n in ndim)
+        raise ValueError(f"{name} must be {forms}; got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise ValueError(
+            f"{name} contains NaN or inf (first at index {tuple(int(i) for i in bad)}); "
+            "all entries must be finite"
+        )
+    return arr
+
+
+def check_shape(arr: np.ndarray, expected: tuple[int, ...], name: str, form: str) -> None:
+    """Raise ``ValueError`` when ``arr.shape != expected``; ``form`` spells the expected shape in
+    symbols, e.g. ``"(dx, dx)"``."""
+    if arr.shape != expected:
+        raise ValueError(f"{name} must have shape {form} = {expected}; got {arr.shape}")

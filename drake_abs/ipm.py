@@ -1,0 +1,415 @@
+"""Batched primal-dual interior point for the mu-softened LCP (MATH.md section 3; paper 000,
+Appendix B, Algorithm 3).
+
+Solves, for every problem b of a batch and every contact i,
+
+    lam >= 0,   s = F lam + q >= 0,   lam_i s_i = mu_i,
+
+stopping on the requested central-path point ``mu`` rather than at an arbitrary iterate, so that
+the returned solution (and its implicit-function-theorem Jacobians) is the unique mu-softened
+solution. ``mu = 0`` solves the exact LCP (hard contact). **A larger mu means more smoothing.**
+
+Algorithm (per problem, vectorised over the batch):
+
+1. Scale: ``F' = D^-1 F D^-1`` with ``D ~ sqrt(diag F)``, and ``q' = D^-1 q / c`` with
+   ``c = max |D^-1 q|`` (powers of two, so the scaling is exact). The products ``lam_i s_i`` scale
+   by ``1 / c^2``; every tolerance below is relative and the scaled problem is O(1).
+2. Mehrotra predictor-corrector on the infeasible-start Newton system
+   ``[-F I; S Lam] [dl; ds] = -[r_p; r_c]``, reduced to ``(F + S Lam^-1) dl = -r_c / lam + r_p``.
+   The centering target of each contact is ``max(sigma * mu_cur, mu_i)`` with
+   ``sigma = (mu_aff / mu_cur)^3``: the duality measure is never driven below the requested mu.
+3. Once a contact reaches its target, its Newton target is exactly ``mu_i`` (no second-order
+   correction): pure centering steps converge quadratically onto the central-path point.
+
+Convergence of a problem means ``residual <= tol`` where
+
+    residual = max( |s - F lam - q|_inf / scale,  max_i |lam_i s_i / mu_i - 1| )
+
+(``scale = c (1 + max(|F' lam'|_inf, |s'|_inf))``: relative to the problem's own size). Targets below
+``(exact_rtol * c)^2`` (in particular ``mu = 0``) are raised to that floor, the finest central
+path double precision resolves for this problem; ``result.mu_target`` reports the raised value.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Literal
+
+import numpy as np
+
+from drake_abs._validation import as_finite_array
+from drake_abs.matrix_class import MatrixClass, classify_matrix
+from drake_abs.sensitivity import batched_inverse, implicit_jacobians, jacobi_scale
+
+OnBadMatrix = Literal["raise", "regularize", "attempt"]
+
+
+class LCPStatus(IntEnum):
+    """Outcome of one LCP solve."""
+
+    CONVERGED = 0
+    MAX_ITERATIONS = 1
+    NUMERICAL_FAILURE = 2  # singular Newton matrix or a non-finite iterate; last finite kept
+
+
+class LCPConvergenceWarning(UserWarning):
+    """Some problems of a batch stopped before meeting the tolerance (non-strict mode)."""
+
+
+class LCPConvergenceError(RuntimeError):
+    """Some problems of a batch stopped before meeting the tolerance (strict mode)."""
+
+
+class LCPRegularizationWarning(UserWarning):
+    """F was regularised before solving; the message says by how much."""
+
+
+@dataclass(frozen=True)
+class LCPResult:
+    """Solution of a (batch of) softened LCP(s).
+
+    Shapes are for a batch of B problems with d contacts; for a single problem the leading B
+    axis is absent. Units: ``lam`` in the units of F^-1 q (impulses for contact problems),
+    ``slack`` in the units of q.
+
+    Attributes:
+        lam: (B, d) contact variables, > 0.
+        slack: (B, d) ``s = F lam + q`` as carried by the solver (primal residual within tol).
+        mu: (B, d) central-path value reached, ``lam * slack`` per contact.
+        mu_target: (B, d) central-path value requested (after the exact floor was applied).
+        iterations: (B,) interior-point iterations taken.
+        converged: (B,) True exactly when ``residual <= tol``.
+        status: (B,) :class:`LCPStatus` codes.
+        residual: (B,) the convergence measure of the module docstring.
+        regularization: (B,) ``delta`` added to F's diagonal (``F + delta I``), 0 if none.
+        matrix_class: (B,) :class:`~drake_abs.matrix_class.MatrixClass` codes, or -1 when the
+            check was skipped (``on_bad_matrix="attempt"``).
+        dlam_dq: (B, d, d) implicit Jacobian, or None unless ``jacobians=True``.
+        dlam_dmu: derivative with respect to mu in the form it was given: (B, d) for a scalar or
+            one-per-problem mu, (B, d, d) for one mu per contact; None unless ``jacobians=True``.
+            Derivatives are of the requested target; for ``mu`` below the exact floor the
+            floor is what was solved.
+    """
+
+    lam: np.ndarray
+    slack: np.ndarray
+    mu: np.ndarray
+    mu_target: np.ndarray
+    iterations: np.ndarray
+    converged: np.ndarray
+    status: np.ndarray
+    residual: np.ndarray
+    regularization: np.ndarray
+    matrix_class: np.ndarray
+    dlam_dq: np.ndarray | None = None
+    dlam_dmu: np.ndarray | None = None
+    tol: float = 1e-12
+
+
+def _matvec(F: np.ndarray, x: np.ndarray) -> np.ndarray:
+    if F.ndim == 2:
+        return x @ F.T
+    return np.matmul(F, x[..., None])[..., 0]
+
+
+def _max_step(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+    """Largest a with x + a dx >= 0, per row (inf when dx >= 0)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(dx < 0, -x / dx, np.inf)
+    return ratio.min(axis=-1)
+
+
+def _solve(Minv: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    return np.matmul(Minv, rhs[..., None])[..., 0]
+
+
+def _normalise_mu(mu, B: int, d: int, single: bool) -> tuple[np.ndarray, str]:
+    arr = as_finite_array(mu, "mu", ndim=(0, 1, 2))
+    if np.any(arr < 0):
+        raise ValueError("mu must be >= 0 (0 is the exact LCP; larger mu is more smoothing)")
+    if arr.ndim == 0:
+        return np.full((B, d), float(arr)), "scalar"
+    if single:
+        if arr.shape != (d,):
+            raise ValueError(
+                f"mu for a single problem must be a scalar or one per contact, shape (d,) = ({d},); "
+                f"got {arr.shape}"
+            )
+        return arr[None, :].copy(), "per_contact"
+    if arr.ndim == 1:
+        if arr.shape != (B,):
+            raise ValueError(
+                f"mu for a batch must be a scalar, one per problem (B,) = ({B},), or one per "
+                f"contact (B, d) = ({B}, {d}); got {arr.shape}"
+            )
+        return np.repeat(arr[:, None], d, axis=1), "per_problem"
+    if arr.shape != (B, d):
+        raise ValueError(
+            f"mu for a batch must be a scalar, one per problem (B,) = ({B},), or one per contact "
+            f"(B, d) = ({B}, {d}); got {arr.shape}"
+        )
+    return arr.copy(), "per_contact"
+
+
+def apply_matrix_policy(
+    F: np.ndarray, on_bad_matrix: OnBadMatrix, B: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Classify F ((d, d) or (B, d, d)) and apply the ``on_bad_matrix`` policy of
+    :func:`solve_lcp`; returns (F, possibly regularised; delta (B,); classes (B,))."""
+    shared = F.ndim == 2
+    if on_bad_matrix == "attempt":
+        return F, np.zeros(B), np.full(B, -1, dtype=np.int8)
+    classes, min_eig = classify_matrix(F)
+    bad = (classes == MatrixClass.UNVERIFIED) | (classes == MatrixClass.NOT_P)
+    delta = np.zeros(classes.shape)
+    if np.any(bad):
+        worst = float(np.min(np.where(bad, min_eig, np.inf)))
+        if on_bad_matrix == "raise":
+            kind = (
+                "has a non-positive principal minor (not a P-matrix)"
+                if np.any(classes == MatrixClass.NOT_P)
+                else f"could not be shown to be a P-matrix (d = {F.shape[-1]} > 10)"
+            )
+            raise ValueError(
+                "F must be positive semidefinite or a P-matrix: the symmetric part of F has "
+                f"smallest eigenvalue {worst:.3e} and F {kind}. Pass on_bad_matrix='regularize' "
+                "to add a multiple of the identity, or 'attempt' to try anyway with convergence "
+                "reported per problem."
+            )
+        # regularise: make the symmetric part positive definite with a small margin.
+        scale = np.max(np.abs(F), axis=(-2, -1))
+        delta = np.where(bad, -min_eig + 1e-8 * np.maximum(scale, 1.0), 0.0)
+        F = F + delta[..., None, None] * np.eye(F.shape[-1])
+        warnings.warn(
+            f"F is neither positive semidefinite nor a verified P-matrix in {int(np.sum(bad))} "
+            f"problem(s); regularised to F + delta I with delta up to {float(np.max(delta)):.3e} "
+            f"(smallest symmetric-part eigenvalue was {worst:.3e})",
+            LCPRegularizationWarning,
+            stacklevel=3,
+        )
+    if shared:
+        return F, np.full(B, float(delta)), np.full(B, int(classes), dtype=np.int8)
+    return F, delta, classes.astype(np.int8)
+
+
+def solve_lcp(
+    F,
+    q,
+    mu=0.0,
+    *,
+    jacobians: bool = False,
+    tol: float = 1e-12,
+    max_iterations: int = 100,
+    exact_rtol: float = 1e-15,
+    strict: bool = False,
+    on_bad_matrix: OnBadMatrix = "raise",
+    warm_start: tuple[np.ndarray, np.ndarray] | None = None,
+) -> LCPResult:
+    """Solve the mu-softened LCP ``lam >= 0, s = F lam + q >= 0, lam_i s_i = mu_i``.
+
+    Args:
+        F: (d, d), shared by the batch, or (B, d, d), one per problem.
+        q: (d,) for one problem or (B, d) for a batch of B.
+        mu: central-path value, >= 0; **larger is smoother** and 0 is the exact LCP. A scalar,
+            one per problem (B,), or one per contact: (d,) for one problem, (B, d) for a batch.
+        jacobians: also return ``dlam_dq`` and ``dlam_dmu`` (MATH.md section 4).
+        tol: relative tolerance on the primal residual and on ``lam_i s_i / mu_i - 1``.
+        max_iterations: iteration limit; problems that hit it are flagged, not hidden.
+        exact_rtol: targets are floored at ``(exact_rtol * c)^2``, ``c = max|q_i| / sqrt(F_ii)``.
+        strict: raise :class:`LCPConvergenceError` instead of warning when a problem does not
+            converge.
+        on_bad_matrix: what to do when F is neither PSD nor a (verifiable) P-matrix: ``"raise"``
+            a ``ValueError``, ``"regularize"`` (add ``delta I`` and warn with delta), or
+            ``"attempt"`` (skip the check and solve; convergence is still reported honestly).
+        warm_start: optional ``(lam0, s0)`` of the same shape as q, strictly positive.
+
+    Returns:
+        :class:`LCPResult`. No NaN is returned: a problem whose iterate became non-finite keeps
+        its last finite iterate and is flagged ``NUMERICAL_FAILURE``.
+    """
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a positive finite number; got {tol!r}")
+    if int(max_iterations) < 1:
+        raise ValueError(f"max_iterations must be >= 1; got {max_iterations!r}")
+    if on_bad_matrix not in ("raise", "regularize", "attempt"):
+        raise ValueError(
+            f"on_bad_matrix must be 'raise', 'regularize' or 'attempt'; got {on_bad_matrix!r}"
+        )
+    q = as_finite_array(q, "q", ndim=(1, 2))
+    single = q.ndim == 1
+    Q = q[None, :] if single else q
+    B, d = Q.shape
+    if d == 0:
+        raise ValueError("q must have at least one contact (shape (d,) or (B, d) with d >= 1)")
+    F = as_finite_array(F, "F", ndim=(2, 3))
+    if F.ndim == 2:
+        if F.shape != (d, d):
+            raise ValueError(f"F must have shape (d, d) = ({d}, {d}) to match q; got {F.shape}")
+    else:
+        if single:
+            raise ValueError(
+                f"F of shape {F.shape} is a batch, but q of shape {q.shape} is one problem; "
+                "pass q as (B, d)"
+            )
+        if F.shape != (B, d, d):
+            raise ValueError(f"F must have shape (d, d) or (B, d, d) = ({B}, {d}, {d}); got {F.shape}")
+    mu_full, mu_form = _normalise_mu(mu, B, d, single)
+    F, delta, classes = apply_matrix_policy(F, on_bad_matrix, B)
+
+    # --- scaling (exact powers of two) -------------------------------------------------------
+    D = jacobi_scale(F)  # (d,) or (B, d)
+    Fs = F / (D[..., :, None] * D[..., None, :])
+    qd = Q / D
+    cmax = np.max(np.abs(qd), axis=1)
+    c = np.exp2(np.round(np.log2(np.where(cmax > 0, cmax, 1.0))))
+    qs = qd / c[:, None]
+    mu_s = np.maximum(mu_full / (c * c)[:, None], exact_rtol * exact_rtol)
+
+    if warm_start is None:
+        start = np.maximum(1.0, np.sqrt(mu_s.max(axis=1)))[:, None]
+        lam = np.repeat(start, d, axis=1)
+        s = lam.copy()
+    else:
+        lam0 = as_finite_array(warm_start[0], "warm_start[0]").reshape(Q.shape)
+        s0 = as_finite_array(warm_start[1], "warm_start[1]").reshape(Q.shape)
+        if np.any(lam0 <= 0) or np.any(s0 <= 0):
+            raise ValueError("warm_start (lam0, s0) must be strictly positive")
+        lam = lam0 * D / c[:, None]
+        s = s0 / (D * c[:, None])
+
+    status = np.full(B, LCPStatus.MAX_ITERATIONS, dtype=np.int8)
+    iterations = np.full(B, max_iterations, dtype=np.int64)
+    residual = np.full(B, np.inf)
+    active = np.arange(B)
+    shared = Fs.ndim == 2
+    diag_idx = np.arange(d)
+
+    for k in range(max_iterations + 1):
+        L, S = lam[active], s[active]
+        Fa = Fs if shared else Fs[active]
+        qa, ma = qs[active], mu_s[active]
+        FL = _matvec(Fa, L)
+        rp = S - FL - qa
+        pscale = 1.0 + np.maximum(np.abs(FL).max(axis=1), np.abs(S).max(axis=1))
+        res_p = np.abs(rp).max(axis=1) / pscale
+        gap = L * S
+        res = np.maximum(res_p, np.abs(gap / ma - 1.0).max(axis=1))
+        residual[active] = res
+        done = res <= tol
+        if np.any(done):
+            status[active[done]] = LCPStatus.CONVERGED
+            iterations[active[done]] = k
+        if k == max_iterations or np.all(done):
+            break
+        keep = ~done
+        active, L, S, qa, ma, rp, gap = (a[keep] for a in (active, L, S, qa, ma, rp, gap))
+        res_p = res_p[keep]
+        if not shared:
+            Fa = Fa[keep]
+        # The primal residual, once within tolerance, is roundoff: do not chase it.
+        rp = np.where((res_p <= tol)[:, None], 0.0, rp)
+
+        M = np.broadcast_to(Fa, (len(active), d, d)).copy()
+        M[:, diag_idx, diag_idx] += S / L
+        with np.errstate(all="ignore"):
+            Minv = batched_inverse(M)
+            # predictor (affine scaling) direction: target lam o s = 0
+            dl_aff = _solve(Minv, -S + rp)
+            ds_aff = _matvec(Fa, dl_aff) - rp
+            a_aff = np.minimum(1.0, np.minimum(_max_step(L, dl_aff), _max_step(S, ds_aff)))
+            gap_aff = (L + a_aff[:, None] * dl_aff) * (S + a_aff[:, None] * ds_aff)
+            # contacts still above their own target drive the duality measure down
+            drive = gap > ma * (1.0 + tol)
+            n_drive = np.maximum(drive.sum(axis=1), 1)
+            mu_cur = np.where(drive, gap, 0.0).sum(axis=1) / n_drive
+            mu_aff = np.where(drive, gap_aff, 0.0).sum(axis=1) / n_drive
+            sigma = np.clip(np.where(mu_cur > 0, mu_aff / mu_cur, 0.0), 0.0, 1.0) ** 3
+            target = np.maximum((sigma * mu_cur)[:, None], ma)
+            corr = np.where(target > ma, dl_aff * ds_aff, 0.0)
+            rc = gap - target + corr
+            dl = _solve(Minv, -rc / L + rp)
+            ds = _matvec(Fa, dl) - rp
+            a_max = np.minimum(_max_step(L, dl), _max_step(S, ds))
+            alpha = np.minimum(1.0, 0.995 * a_max)[:, None]
+            L_new = L + alpha * dl
+            S_new = S + alpha * ds
+        ok = (
+            np.all(np.isfinite(L_new), axis=1)
+            & np.all(np.isfinite(S_new), axis=1)
+            & np.all(L_new > 0, axis=1)
+            & np.all(S_new > 0, axis=1)
+        )
+        if not np.all(ok):
+            failed = active[~ok]
+            status[failed] = LCPStatus.NUMERICAL_FAILURE
+            iterations[failed] = k
+        lam[active[ok]] = L_new[ok]
+        s[active[ok]] = S_new[ok]
+        active = active[ok]
+        if active.size == 0:
+            break
+
+    converged = status == LCPStatus.CONVERGED
+    lam_out = lam * c[:, None] / D
+    s_out = s * c[:, None] * D
+    dlam_dq = dlam_dmu = None
+    if jacobians:
+        with np.errstate(all="ignore"):
+            dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
+        dlam_dmu = dlam_dmu_pc if mu_form == "per_contact" else dlam_dmu_pc.sum(axis=-1)
+    result = LCPResult(
+        lam=lam_out,
+        slack=s_out,
+        mu=lam_out * s_out,
+        mu_target=mu_s * (c * c)[:, None],
+        iterations=iterations,
+        converged=converged,
+        status=status,
+        residual=residual,
+        regularization=np.broadcast_to(delta, (B,)).copy(),
+        matrix_class=classes,
+        dlam_dq=dlam_dq,
+        dlam_dmu=dlam_dmu,
+        tol=tol,
+    )
+    _report(result, strict, max_iterations)
+    return _squeeze(result) if single else result
+
+
+def _report(result: LCPResult, strict: bool, max_iterations: int) -> None:
+    if np.all(result.converged):
+        return
+    bad = ~result.converged
+    n_fail = int(np.sum(result.status == LCPStatus.NUMERICAL_FAILURE))
+    msg = (
+        f"{int(bad.sum())} of {bad.size} LCP solve(s) did not converge: worst residual "
+        f"{float(np.max(result.residual[bad])):.3e} against tol {result.tol:.1e} "
+        f"({int(bad.sum()) - n_fail} hit max_iterations = {max_iterations}, {n_fail} numerical "
+        "failure(s)); their `converged` flags are False"
+    )
+    if strict:
+        raise LCPConvergenceError(msg)
+    warnings.warn(msg, LCPConvergenceWarning, stacklevel=3)
+
+
+def _squeeze(r: LCPResult) -> LCPResult:
+    def first(a):
+        return None if a is None else a[0]
+
+    return LCPResult(
+        lam=r.lam[0],
+        slack=r.slack[0],
+        mu=r.mu[0],
+        mu_target=r.mu_target[0],
+        iterations=r.iterations[0],
+        converged=r.converged[0],
+        status=r.status[0],
+        residual=r.residual[0],
+        regularization=r.regularization[0],
+        matrix_class=r.matrix_class[0],
+        dlam_dq=first(r.dlam_dq),
+        dlam_dmu=first(r.dlam_dmu),
+        tol=r.tol,
+    )

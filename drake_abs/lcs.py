@@ -1,0 +1,176 @@
+"""The mu-softened linear complementarity system (MATH.md section 1 and 4).
+
+    x+ = A x + B u + C lam + c
+    z  = D x + E u + d,        s = z + F lam,        lam >= 0, s >= 0, lam_i s_i = mu_i
+
+:meth:`LCS.step` is the single implementation of one step: the batched core, rollouts and the
+Drake system (``drake_abs.systems.LcsPlant``) all call it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from drake_abs._validation import as_finite_array, check_shape
+from drake_abs.ipm import LCPResult, OnBadMatrix, apply_matrix_policy, solve_lcp
+from drake_abs.smoothing import Exact, SmoothingPolicy
+
+GradientMode = Literal["frozen", "total"]
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One batched LCS step. Shapes for a batch of B (no leading axis for a single state).
+
+    Attributes:
+        x_next: (B, dx) next state.
+        lam: (B, d) contact impulses.
+        mu: (B, d) central-path value reached per contact.
+        converged: (B,) solver convergence flags.
+        dx_dx, dx_du: (B, dx, dx), (B, dx, du) Jacobians of x_next (None if not requested).
+        dlam_dx, dlam_du: (B, d, dx), (B, d, du) Jacobians of lam (None if not requested).
+        dmu_dx, dmu_du: (B, d, dx), (B, d, du) Jacobians of the requested mu (zero in frozen
+            mode; None if not requested).
+        lcp: the solver's full result.
+    """
+
+    x_next: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    converged: np.ndarray
+    dx_dx: np.ndarray | None
+    dx_du: np.ndarray | None
+    dlam_dx: np.ndarray | None
+    dlam_du: np.ndarray | None
+    dmu_dx: np.ndarray | None
+    dmu_du: np.ndarray | None
+    lcp: LCPResult
+
+
+@dataclass(frozen=True)
+class LCS:
+    """A linear complementarity system with state dimension dx, input du and d contacts.
+
+    Matrices: A (dx, dx), B (dx, du), C (dx, d), c (dx,), D (d, dx), E (d, du), F (d, d),
+    d (d,). F is checked once at construction (positive semidefinite or P-matrix, see
+    :mod:`drake_abs.matrix_class`) according to ``on_bad_matrix``.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    c: np.ndarray
+    D: np.ndarray
+    E: np.ndarray
+    F: np.ndarray
+    d: np.ndarray
+    on_bad_matrix: OnBadMatrix = "raise"
+    solver_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        arrays = {}
+        for name in "ABCcDEFd":
+            want = (1,) if name in "cd" else (2,)
+            arrays[name] = as_finite_array(getattr(self, name), f"LCS.{name}", ndim=want)
+        nx = arrays["A"].shape[0]
+        nu = arrays["B"].shape[1]
+        nc = arrays["F"].shape[0]
+        forms = {
+            "A": ((nx, nx), "(dx, dx)"),
+            "B": ((nx, nu), "(dx, du)"),
+            "C": ((nx, nc), "(dx, d)"),
+            "c": ((nx,), "(dx,)"),
+            "D": ((nc, nx), "(d, dx)"),
+            "E": ((nc, nu), "(d, du)"),
+            "F": ((nc, nc), "(d, d)"),
+            "d": ((nc,), "(d,)"),
+        }
+        for name, (shape, form) in forms.items():
+            check_shape(arrays[name], shape, f"LCS.{name}", form)
+        # One matrix check here, so that every step can skip it.
+        arrays["F"] = apply_matrix_policy(arrays["F"], self.on_bad_matrix)[0]
+        for name, arr in arrays.items():
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """``(dx, du, d)``."""
+        return self.A.shape[0], self.B.shape[1], self.F.shape[0]
+
+    def contact_distance(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``z = D x + E u + d`` for batched x (B, dx), u (B, du); returns (B, d)."""
+        return x @ self.D.T + u @ self.E.T + self.d
+
+    def _inputs(self, x, u) -> tuple[np.ndarray, np.ndarray, bool]:
+        nx, nu, _ = self.dims
+        x = as_finite_array(x, "x", ndim=(1, 2))
+        single = x.ndim == 1
+        X = x[None] if single else x
+        if X.shape[1] != nx:
+            raise ValueError(f"x must have shape (dx,) or (B, dx) with dx = {nx}; got {x.shape}")
+        u = as_finite_array(u, "u", ndim=(1, 2))
+        U = np.broadcast_to(u, (X.shape[0], nu)) if u.shape in ((nu,), (1, nu)) else u
+        if U.shape != (X.shape[0], nu):
+            raise ValueError(
+                f"u must have shape (du,) or (B, du) = ({X.shape[0]}, {nu}) to match x; "
+                f"got {u.shape}"
+            )
+        return X, U, single
+
+    def step(
+        self,
+        x,
+        u,
+        smoothing: SmoothingPolicy | None = None,
+        *,
+        gradient: GradientMode = "frozen",
+        jacobians: bool = True,
+        strict: bool = False,
+    ) -> StepResult:
+        """Advance a batch of states one step.
+
+        Args:
+            x: (dx,) or (B, dx) states.
+            u: (du,) or (B, du) inputs (one input broadcasts over the batch).
+            smoothing: the per-contact mu policy (default :class:`Exact`); larger mu is smoother.
+            gradient: ``"frozen"`` treats mu as a constant (paper 000 Algorithm 1); ``"total"``
+                also differentiates mu(z) through z.
+            jacobians: compute dx+/dx, dx+/du and the lam and mu Jacobians.
+            strict: raise instead of warning when the LCP solve does not converge.
+        """
+        if gradient not in ("frozen", "total"):
+            raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+        smoothing = Exact() if smoothing is None else smoothing
+        X, U, single = self._inputs(x, u)
+        z = self.contact_distance(X, U)
+        mu = smoothing.mu(z, self.F)
+        options = {"on_bad_matrix": "attempt", **self.solver_options}
+        lcp = solve_lcp(self.F, z, mu, jacobians=jacobians, strict=strict, **options)
+        x_next = X @ self.A.T + U @ self.B.T + lcp.lam @ self.C.T + self.c
+        jac = [None] * 6
+        if jacobians:
+            dlam_dz = lcp.dlam_dq
+            dmu_dz = smoothing.dmu_dz(z, self.F) if gradient == "total" else None
+            if dmu_dz is not None:
+                dlam_dz = dlam_dz + lcp.dlam_dmu @ dmu_dz
+            dlam_dx = dlam_dz @ self.D
+            dlam_du = dlam_dz @ self.E
+            dx_dx = self.A + self.C @ dlam_dx
+            dx_du = self.B + self.C @ dlam_du
+            if dmu_dz is None:
+                dmu_dx = np.zeros(dlam_dx.shape)
+                dmu_du = np.zeros(dlam_du.shape)
+            else:
+                dmu_dx, dmu_du = dmu_dz @ self.D, dmu_dz @ self.E
+            jac = [dx_dx, dx_du, dlam_dx, dlam_du, dmu_dx, dmu_du]
+        out = StepResult(x_next, lcp.lam, lcp.mu, lcp.converged, *jac, lcp=lcp)
+        return _first(out) if single else out
+
+
+def _first(r: StepResult) -> StepResult:
+    fields = {k: (v if v is None or k == "lcp" else v[0]) for k, v in r.__dict__.items()}
+    return StepResult(**fields)

@@ -1,0 +1,76 @@
+"""Implicit-function-theorem Jacobians of the softened LCP solution (MATH.md section 4; paper 000,
+Theorem A.3).
+
+At a solution, ``G(lam; q, F, mu) = lam o (q + F lam) - mu = 0`` with
+``K = dG/dlam = diag(s) + diag(lam) F``. Because ``K = diag(lam) (F + diag(s / lam))``,
+
+    d lam / d q   = -K^-1 diag(lam) = -(F + diag(s / lam))^-1
+    d lam / d mu  =  K^-1 = (F + diag(s / lam))^-1 diag(1 / lam)      (mu one per contact)
+    d lam / d F_ij = (d lam / d q_i) lam_j
+
+The matrix ``F + diag(s / lam)`` is inverted after a symmetric Jacobi scaling, which keeps it well
+conditioned when ``s / lam`` spans many decades (contacts far from and deep in contact).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def jacobi_scale(F: np.ndarray) -> np.ndarray:
+    """Positive diagonal scaling D (..., d) with ``D_i ~ sqrt(F_ii)`` rounded to a power of two (so
+    that scaling is exact in floating point); ``D_i = 1`` where ``F_ii <= 0``."""
+    diag = np.diagonal(F, axis1=-2, axis2=-1)
+    with np.errstate(divide="ignore"):
+        expo = np.round(0.5 * np.log2(np.where(diag > 0, diag, 1.0)))
+    return np.exp2(expo)
+
+
+def batched_inverse(M: np.ndarray) -> np.ndarray:
+    """Inverse of a stack of square matrices (..., d, d), with closed forms for d = 1 and 2."""
+    d = M.shape[-1]
+    if d == 1:
+        return 1.0 / M
+    if d == 2:
+        a, b = M[..., 0, 0], M[..., 0, 1]
+        c, e = M[..., 1, 0], M[..., 1, 1]
+        det = a * e - b * c
+        out = np.empty_like(M)
+        out[..., 0, 0] = e / det
+        out[..., 0, 1] = -b / det
+        out[..., 1, 0] = -c / det
+        out[..., 1, 1] = a / det
+        return out
+    return np.linalg.inv(M)
+
+
+def implicit_jacobians(
+    F: np.ndarray, lam: np.ndarray, slack: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Jacobians of the softened LCP solution at a point on the central path.
+
+    Args:
+        F: (d, d) shared or (B, d, d) per problem.
+        lam: impulses (B, d), strictly positive.
+        slack: ``s = F lam + q`` (B, d), strictly positive.
+
+    Returns:
+        ``(dlam_dq, dlam_dmu)``, each (B, d, d); ``dlam_dmu`` is with respect to a per-contact mu
+        (sum its last axis for the derivative with respect to one scalar mu).
+    """
+    D = jacobi_scale(F)
+    if D.ndim == 1:
+        D = np.broadcast_to(D, lam.shape)
+    Fs = F / (D[..., :, None] * D[..., None, :])
+    # In the scaled variables lam' = D lam, s' = s / D the ratio is s' / lam' = s / (D^2 lam).
+    M = np.broadcast_to(Fs, lam.shape[:-1] + Fs.shape[-2:]).copy()
+    idx = np.arange(lam.shape[-1])
+    M[..., idx, idx] += slack / (D * D * lam)
+    Minv = batched_inverse(M) / (D[..., :, None] * D[..., None, :])
+    return -Minv, Minv / lam[..., None, :]
+
+
+def dlam_dF(dlam_dq: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """``d lam_k / d F_ij`` as an array (..., d, d, d) indexed [k, i, j], from ``dlam_dq`` (..., d, d)
+    and ``lam`` (..., d): perturbing F_ij acts on the solution like perturbing q_i by lam_j."""
+    return dlam_dq[..., :, :, None] * lam[..., None, None, :]

@@ -1,0 +1,205 @@
+"""Smoothing policies: how much to soften each contact (MATH.md section 5; paper 000 section 5).
+
+A policy maps a batch of contact distances ``z`` (B, d) (the distances before any impulse acts,
+``z = D x + E u + d``) and the LCP matrix F to a per-contact central-path value ``mu`` (B, d).
+
+**Direction: a larger mu means more smoothing** (contact forces act at a larger distance and the
+dynamics are less stiff); ``mu = 0`` is hard contact.
+
+- :class:`Exact`: ``mu = 0`` (hard contact, solved to the solver's exact floor).
+- :class:`Fixed`: barrier smoothing (BS), one constant mu everywhere.
+- :class:`ContactAware`: adaptive barrier smoothing (ABS), ``mu = g(dist)`` with ``dist`` the
+  distance of the nearest *inactive* contact (``z_i > 0``) and g non-increasing.
+- :class:`GaussianMatched`: per-contact ABS whose softened solution equals the Gaussian-smoothed
+  exact solution (paper 000 Prop. 5.3 / paper 001 Prop. 4.2, corrected as in MATH.md 5b).
+
+Each policy also gives ``dmu_dz`` (B, d, d) for the ``total`` gradient mode; the ``frozen`` mode
+(paper 000 Algorithm 1) treats mu as a constant.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+_INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
+
+
+def _diag(F: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    return np.broadcast_to(np.diagonal(F, axis1=-2, axis2=-1), shape)
+
+
+def _check_positive(value: float, name: str, *, allow_zero: bool = False) -> float:
+    value = float(value)
+    ok = value >= 0 if allow_zero else value > 0
+    if not (np.isfinite(value) and ok):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be a finite number {bound}; got {value!r}")
+    return value
+
+
+class SmoothingPolicy(ABC):
+    """Maps contact distances z (B, d) and F ((d, d) or (B, d, d)) to mu (B, d)."""
+
+    @abstractmethod
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """Per-contact central-path value (B, d), >= 0; larger is smoother."""
+
+    def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """Derivative of :meth:`mu` with respect to z, (B, d, d). Zero for constant policies."""
+        return np.zeros(z.shape + z.shape[-1:])
+
+
+@dataclass(frozen=True)
+class Exact(SmoothingPolicy):
+    """Hard contact: ``mu = 0`` (the solver stops at its exact floor, see ``solve_lcp``)."""
+
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return np.zeros_like(z)
+
+
+@dataclass(frozen=True)
+class Fixed(SmoothingPolicy):
+    """Barrier smoothing (BS): the same ``mu`` for every contact and state. Larger is smoother.
+
+    Units: those of ``lam * z`` (impulse times distance for contact problems).
+    """
+
+    value: float
+
+    def __post_init__(self):
+        _check_positive(self.value, "Fixed.value", allow_zero=True)
+
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return np.full_like(z, self.value)
+
+
+def exponential_decay(mu_min: float, mu_max: float, length: float) -> Callable:
+    """``g(dist) = mu_min + (mu_max - mu_min) exp(-dist / length)`` and its derivative."""
+
+    def g(dist):
+        e = np.exp(-dist / length)
+        return mu_min + (mu_max - mu_min) * e, -(mu_max - mu_min) / length * e
+
+    return g
+
+
+@dataclass(frozen=True)
+class ContactAware(SmoothingPolicy):
+    """Adaptive barrier smoothing (ABS), contact-aware (paper 000 section 5.1, Algorithm 1).
+
+    ``mu = g(dist)`` for every contact of a problem, where ``dist = min {z_i : z_i > 0}`` is the
+    distance of the nearest inactive contact and ``g`` is non-increasing:
+    ``g(dist) = mu_min + (mu_max - mu_min) exp(-dist / length)`` by default. Far from contact
+    (or with every contact active) mu = mu_min (accurate physics); an inactive contact closing in
+    on an obstacle raises mu towards mu_max (more smoothing).
+
+    Note: as in the paper, mu jumps from about mu_max to mu_min when the nearest contact turns
+    active (z crosses 0); the ``total`` gradient mode differentiates g but not that jump.
+
+    Args:
+        mu_max: mu at zero distance (the most smoothing), > mu_min.
+        length: decay length of g, in the units of z (> 0).
+        mu_min: mu far from contact, >= 0 (0 is exact).
+        g: optional custom non-increasing ``g(dist) -> (mu, dmu_ddist)`` replacing the default.
+    """
+
+    mu_max: float
+    length: float
+    mu_min: float = 0.0
+    g: Callable | None = None
+
+    def __post_init__(self):
+        _check_positive(self.mu_max, "ContactAware.mu_max")
+        _check_positive(self.length, "ContactAware.length")
+        _check_positive(self.mu_min, "ContactAware.mu_min", allow_zero=True)
+        if self.mu_min > self.mu_max:
+            raise ValueError(
+                f"ContactAware needs mu_min <= mu_max; got mu_min={self.mu_min}, "
+                f"mu_max={self.mu_max}"
+            )
+
+    def _g(self, dist):
+        g = self.g or exponential_decay(self.mu_min, self.mu_max, self.length)
+        return g(dist)
+
+    def _nearest_inactive(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        inactive = z > 0
+        masked = np.where(inactive, z, np.inf)
+        arg = np.argmin(masked, axis=-1)
+        dist = np.take_along_axis(masked, arg[..., None], axis=-1)[..., 0]
+        return dist, arg, inactive.any(axis=-1)
+
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        dist, _, any_inactive = self._nearest_inactive(z)
+        val, _ = self._g(np.where(any_inactive, dist, 0.0))
+        val = np.where(any_inactive, val, self.mu_min)
+        return np.repeat(np.asarray(val, dtype=float)[..., None], z.shape[-1], axis=-1)
+
+    def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        dist, arg, any_inactive = self._nearest_inactive(z)
+        _, dg = self._g(np.where(any_inactive, dist, 0.0))
+        dg = np.where(any_inactive, dg, 0.0)
+        out = np.zeros(z.shape + z.shape[-1:])
+        # every contact's mu depends on the nearest inactive contact's z
+        onehot = np.zeros_like(z)
+        np.put_along_axis(onehot, arg[..., None], 1.0, axis=-1)
+        out[...] = (dg[..., None] * onehot)[..., None, :]
+        return out
+
+
+@dataclass(frozen=True)
+class GaussianMatched(SmoothingPolicy):
+    """Per-contact ABS matched to Gaussian randomised smoothing (MATH.md 5b, corrected).
+
+    With ``kappa(z) = (sigma phi(z/sigma) - z Phi(-z/sigma)) / F_ii + c1 z + c2`` and
+    ``mu(z) = kappa (z + F_ii kappa)``, the softened one-contact solution with c1 = c2 = 0 equals
+    ``E_w[max(0, -(z + w) / F)]`` for ``w ~ N(0, sigma^2)``: barrier smoothing that reproduces
+    randomised smoothing in closed form. mu is large only near z = 0 and vanishes far from contact
+    on both sides. **A larger sigma means more smoothing.** With several contacts each uses its own
+    diagonal entry F_ii (exact when F is diagonal). Negative kappa (possible with c1, c2 != 0) is
+    clipped to mu = 0.
+
+    Args:
+        sigma: width of the matched Gaussian, in the units of z (> 0).
+        c1, c2: the paper's tunable constants (0 for the exact match).
+    """
+
+    sigma: float
+    c1: float = 0.0
+    c2: float = 0.0
+
+    def __post_init__(self):
+        _check_positive(self.sigma, "GaussianMatched.sigma")
+        for name in ("c1", "c2"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"GaussianMatched.{name} must be finite")
+
+    def _parts(self, z: np.ndarray, F: np.ndarray):
+        Fd = _diag(F, z.shape)
+        t = z / self.sigma
+        pdf = _INV_SQRT_2PI * np.exp(-0.5 * t * t)
+        # E[max(0, -(z + w))] and E[max(0, z + w)], both without cancellation
+        neg_part = self.sigma * pdf - z * ndtr(-t)
+        pos_part = self.sigma * pdf + z * ndtr(t)
+        kappa = neg_part / Fd + self.c1 * z + self.c2
+        slack = pos_part + Fd * (self.c1 * z + self.c2)
+        return Fd, t, kappa, slack
+
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        _, _, kappa, slack = self._parts(z, F)
+        return np.maximum(kappa * slack, 0.0)
+
+    def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        Fd, t, kappa, slack = self._parts(z, F)
+        dkappa = -ndtr(-t) / Fd + self.c1
+        dmu = dkappa * slack + kappa * (1.0 + Fd * dkappa)
+        dmu = np.where(kappa * slack > 0, dmu, 0.0)
+        out = np.zeros(z.shape + z.shape[-1:])
+        idx = np.arange(z.shape[-1])
+        out[..., idx, idx] = dmu
+        return out
