@@ -12,7 +12,9 @@ def as_finite_array(value, name: str, *, ndim: tuple[int, ...] | None = None) ->
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must be a real numeric array; got {type(value).__name__}") from err
+        raise ValueError(
+            f"{name} must be a real numeric array; got {type(value).__name__}"
+        ) from err
     if ndim is not None and arr.ndim not in ndim:
         forms = " or ".join(f"{n}-D" for n in ndim)
         raise ValueError(f"{name} must be {forms}; got shape {arr.shape}")

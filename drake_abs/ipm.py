@@ -15,7 +15,8 @@ Algorithm (per problem, vectorised over the batch):
    ``c = max |D^-1 q|`` (powers of two, so the scaling is exact). The products ``lam_i s_i`` scale
    by ``1 / c^2``; every tolerance below is relative and the scaled problem is O(1).
 2. Mehrotra predictor-corrector on the infeasible-start Newton system
-   ``[-F I; S Lam] [dl; ds] = -[r_p; r_c]``, reduced to ``(F + S Lam^-1) dl = -r_c / lam + r_p``.
+   ``[-F I; S Lam] [dl; ds] = -[r_p; r_c]``, reduced to ``(S + Lam F) dl = -r_c + Lam r_p`` and
+   solved with the rows of ``S + Lam F`` equilibrated by ``1 / (s + lam)``.
    The centering target of each contact is ``max(sigma * mu_cur, mu_i)`` with
    ``sigma = (mu_aff / mu_cur)^3``: the duality measure is never driven below the requested mu.
 3. Once a contact reaches its target, its Newton target is exactly ``mu_i`` (no second-order
@@ -25,9 +26,10 @@ Convergence of a problem means ``residual <= tol`` where
 
     residual = max( |s - F lam - q|_inf / scale,  max_i |lam_i s_i / mu_i - 1| )
 
-(``scale = c (1 + max(|F' lam'|_inf, |s'|_inf))``: relative to the problem's own size). Targets below
-``(exact_rtol * c)^2`` (in particular ``mu = 0``) are raised to that floor, the finest central
-path double precision resolves for this problem; ``result.mu_target`` reports the raised value.
+(``scale = c (1 + max(|F' lam'|_inf, |s'|_inf))``: relative to the problem's own size).
+Targets below ``(exact_rtol * c)^2`` (in particular ``mu = 0``) are raised to that floor, the
+finest central path double precision resolves for this problem; ``result.mu_target`` reports
+the raised value.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ import numpy as np
 
 from drake_abs._validation import as_finite_array
 from drake_abs.matrix_class import MatrixClass, classify_matrix
-from drake_abs.sensitivity import batched_inverse, implicit_jacobians, jacobi_scale
+from drake_abs.sensitivity import equilibrated_newton_inverse, implicit_jacobians, jacobi_scale
 
 OnBadMatrix = Literal["raise", "regularize", "attempt"]
 
@@ -134,8 +136,8 @@ def _normalise_mu(mu, B: int, d: int, single: bool) -> tuple[np.ndarray, str]:
     if single:
         if arr.shape != (d,):
             raise ValueError(
-                f"mu for a single problem must be a scalar or one per contact, shape (d,) = ({d},); "
-                f"got {arr.shape}"
+                f"mu for a single problem must be a scalar or one per contact, shape (d,) = "
+                f"({d},); got {arr.shape}"
             )
         return arr[None, :].copy(), "per_contact"
     if arr.ndim == 1:
@@ -254,7 +256,9 @@ def solve_lcp(
                 "pass q as (B, d)"
             )
         if F.shape != (B, d, d):
-            raise ValueError(f"F must have shape (d, d) or (B, d, d) = ({B}, {d}, {d}); got {F.shape}")
+            raise ValueError(
+                f"F must have shape (d, d) or (B, d, d) = ({B}, {d}, {d}); got {F.shape}"
+            )
     mu_full, mu_form = _normalise_mu(mu, B, d, single)
     F, delta, classes = apply_matrix_policy(F, on_bad_matrix, B)
 
@@ -284,7 +288,6 @@ def solve_lcp(
     residual = np.full(B, np.inf)
     active = np.arange(B)
     shared = Fs.ndim == 2
-    diag_idx = np.arange(d)
 
     for k in range(max_iterations + 1):
         L, S = lam[active], s[active]
@@ -311,12 +314,14 @@ def solve_lcp(
         # The primal residual, once within tolerance, is roundoff: do not chase it.
         rp = np.where((res_p <= tol)[:, None], 0.0, rp)
 
-        M = np.broadcast_to(Fa, (len(active), d, d)).copy()
-        M[:, diag_idx, diag_idx] += S / L
         with np.errstate(all="ignore"):
-            Minv = batched_inverse(M)
+            # Newton matrix K = S + Lam F with its rows equilibrated by 1 / (s + lam): every row
+            # is O(1) whether the contact is far (s >> lam) or deep (lam >> s), so pivoting is
+            # reliable when s / lam spans many decades.
+            Kinv, w = equilibrated_newton_inverse(Fa, L, S)
+            Lrp = L * rp
             # predictor (affine scaling) direction: target lam o s = 0
-            dl_aff = _solve(Minv, -S + rp)
+            dl_aff = _solve(Kinv, (Lrp - gap) * w)
             ds_aff = _matvec(Fa, dl_aff) - rp
             a_aff = np.minimum(1.0, np.minimum(_max_step(L, dl_aff), _max_step(S, ds_aff)))
             gap_aff = (L + a_aff[:, None] * dl_aff) * (S + a_aff[:, None] * ds_aff)
@@ -329,7 +334,7 @@ def solve_lcp(
             target = np.maximum((sigma * mu_cur)[:, None], ma)
             corr = np.where(target > ma, dl_aff * ds_aff, 0.0)
             rc = gap - target + corr
-            dl = _solve(Minv, -rc / L + rp)
+            dl = _solve(Kinv, (Lrp - rc) * w)
             ds = _matvec(Fa, dl) - rp
             a_max = np.minimum(_max_step(L, dl), _max_step(S, ds))
             alpha = np.minimum(1.0, 0.995 * a_max)[:, None]

@@ -39,7 +39,9 @@ def _strictly_diagonally_dominant(F: np.ndarray) -> np.ndarray:
     diag = np.diagonal(F, axis1=-2, axis2=-1)
     off = np.abs(F).sum(axis=-1) - np.abs(diag)
     off_col = np.abs(F).sum(axis=-2) - np.abs(diag)
-    return np.all(diag > 0, axis=-1) & (np.all(diag > off, axis=-1) | np.all(diag > off_col, axis=-1))
+    return np.all(diag > 0, axis=-1) & (
+        np.all(diag > off, axis=-1) | np.all(diag > off_col, axis=-1)
+    )
 
 
 def _all_principal_minors_positive(F: np.ndarray) -> np.ndarray:

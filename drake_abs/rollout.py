@@ -63,7 +63,9 @@ def rollout(
     u = as_finite_array(u, "u", ndim=(2, 3))
     U = np.broadcast_to(u, (nb,) + u.shape) if u.ndim == 2 else u
     if U.shape[0] != nb or U.shape[2] != nu:
-        raise ValueError(f"u must have shape (N, du) or (B, N, du) with B = {nb}, du = {nu}; got {u.shape}")
+        raise ValueError(
+            f"u must have shape (N, du) or (B, N, du) with B = {nb}, du = {nu}; got {u.shape}"
+        )
     n = U.shape[1]
     xs = np.empty((nb, n + 1, nx))
     lams = np.empty((nb, n, nc))

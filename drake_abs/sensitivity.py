@@ -8,8 +8,8 @@ At a solution, ``G(lam; q, F, mu) = lam o (q + F lam) - mu = 0`` with
     d lam / d mu  =  K^-1 = (F + diag(s / lam))^-1 diag(1 / lam)      (mu one per contact)
     d lam / d F_ij = (d lam / d q_i) lam_j
 
-The matrix ``F + diag(s / lam)`` is inverted after a symmetric Jacobi scaling, which keeps it well
-conditioned when ``s / lam`` spans many decades (contacts far from and deep in contact).
+K is inverted with its rows equilibrated (see :func:`equilibrated_newton_inverse`), the same
+matrix the interior-point iterations factor.
 """
 
 from __future__ import annotations
@@ -58,19 +58,28 @@ def implicit_jacobians(
         ``(dlam_dq, dlam_dmu)``, each (B, d, d); ``dlam_dmu`` is with respect to a per-contact mu
         (sum its last axis for the derivative with respect to one scalar mu).
     """
-    D = jacobi_scale(F)
-    if D.ndim == 1:
-        D = np.broadcast_to(D, lam.shape)
-    Fs = F / (D[..., :, None] * D[..., None, :])
-    # In the scaled variables lam' = D lam, s' = s / D the ratio is s' / lam' = s / (D^2 lam).
-    M = np.broadcast_to(Fs, lam.shape[:-1] + Fs.shape[-2:]).copy()
+    Kinv, w = equilibrated_newton_inverse(F, lam, slack)
+    return -Kinv * (lam * w)[..., None, :], Kinv * w[..., None, :]
+
+
+def equilibrated_newton_inverse(
+    F: np.ndarray, lam: np.ndarray, slack: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of ``diag(w) K`` with ``K = diag(s) + diag(lam) F`` and ``w = 1 / (s + lam)``.
+
+    Row equilibration keeps every row O(1) whether a contact is far (s >> lam) or deep
+    (lam >> s), so partial pivoting stays reliable when ``s / lam`` spans many decades. Returns
+    ``((diag(w) K)^-1, w)``; then ``K^-1 = (diag(w) K)^-1 diag(w)``. Shapes (B, d, d), (B, d).
+    """
+    w = 1.0 / (slack + lam)
+    K = np.broadcast_to(F, lam.shape[:-1] + F.shape[-2:]) * (lam * w)[..., :, None]
     idx = np.arange(lam.shape[-1])
-    M[..., idx, idx] += slack / (D * D * lam)
-    Minv = batched_inverse(M) / (D[..., :, None] * D[..., None, :])
-    return -Minv, Minv / lam[..., None, :]
+    K[..., idx, idx] += slack * w
+    return batched_inverse(K), w
 
 
 def dlam_dF(dlam_dq: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """``d lam_k / d F_ij`` as an array (..., d, d, d) indexed [k, i, j], from ``dlam_dq`` (..., d, d)
-    and ``lam`` (..., d): perturbing F_ij acts on the solution like perturbing q_i by lam_j."""
+    """``d lam_k / d F_ij`` as an array (..., d, d, d) indexed [k, i, j], from ``dlam_dq``
+    (..., d, d) and ``lam`` (..., d): perturbing F_ij acts on the solution like perturbing q_i
+    by lam_j."""
     return dlam_dq[..., :, :, None] * lam[..., None, None, :]

@@ -1,1 +1,1 @@
-"""placeholder"""
+"""Experiments and the command line (installed as ``drake_abs.experiments``)."""

@@ -1,1 +1,6 @@
-"""placeholder"""
+"""Thin Drake systems that call the numerical core (installed as ``drake_abs.systems``)."""
+
+from drake_abs.systems.lcs_plant import LcsPlant, LcsPlant_
+from drake_abs.systems.point_visualizer import PointMassVisualizer
+
+__all__ = ["LcsPlant", "LcsPlant_", "PointMassVisualizer"]

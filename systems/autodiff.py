@@ -1,0 +1,32 @@
+"""Moving between AutoDiffXd arrays and (value, gradient) pairs of float arrays.
+
+Drake systems of this package solve in double and inject the implicit-function-theorem Jacobians
+into the derivatives, instead of pushing AutoDiffXd through the interior-point iterations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+
+
+def is_autodiff(arr: np.ndarray) -> bool:
+    """True for an object array of AutoDiffXd (as Drake hands state and ports under AutoDiffXd)."""
+    return arr.dtype == object and arr.size > 0 and isinstance(arr.flat[0], AutoDiffXd)
+
+
+def split(arrays: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Values (n_i,) and gradients (n_i, k) of AutoDiffXd vectors, padded to a common k.
+
+    Vectors whose entries carry no derivatives get zero gradients of width k.
+    """
+    values = [ExtractValue(a).ravel() if a.size else np.zeros(0) for a in arrays]
+    grads = [ExtractGradient(a) if a.size else np.zeros((0, 0)) for a in arrays]
+    k = max((g.shape[1] for g in grads), default=0)
+    grads = [g if g.shape[1] == k else np.zeros((g.shape[0], k)) for g in grads]
+    return values, grads
+
+
+def join(value: np.ndarray, gradient: np.ndarray) -> np.ndarray:
+    """An AutoDiffXd vector (n,) with the given value (n,) and gradient (n, k)."""
+    return InitializeAutoDiff(value.reshape(-1, 1), gradient).ravel()
