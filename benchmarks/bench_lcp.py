@@ -41,6 +41,7 @@ The numbers printed are also written as JSON (default ``results/bench_lcp.json``
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import json
 import os
 import platform
@@ -88,7 +89,7 @@ class Config:
     repeats_tradeoff: int  # timing repeats per batched solve in section 4
 
 
-FULL = Config("full", 30, 30, 7, 5, 0.5, 1000, 5)
+FULL = Config("full", 30, 30, 11, 7, 1.0, 1000, 9)
 QUICK = Config("quick", 10, 3, 3, 3, 0.1, 1000, 3)
 
 
@@ -578,14 +579,16 @@ def bench_tradeoff(cfg: Config, log: WarningLog) -> dict[str, Any]:
 
 
 def metadata(cfg: Config) -> dict[str, Any]:
-    import pydrake
-
+    try:
+        drake_version = importlib.metadata.version("drake")
+    except importlib.metadata.PackageNotFoundError:
+        drake_version = "unknown"
     return {
         "config": asdict(cfg),
         "seed": SEED,
         "python": platform.python_version(),
         "numpy": np.__version__,
-        "drake": getattr(pydrake, "__version__", "unknown"),
+        "drake": drake_version,
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
     }

@@ -24,12 +24,15 @@ Algorithm (per problem, vectorised over the batch):
 
 Convergence of a problem means ``residual <= tol`` where
 
-    residual = max( |s - F lam - q|_inf / scale,  max_i |lam_i s_i / mu_i - 1| )
+    residual = max( |s - F lam - q|_inf / scale,
+                    max_i |lam_i s_i - mu_i| / (mu_i + gap_atol / tol) )
 
-(``scale = c (1 + max(|F' lam'|_inf, |s'|_inf))``: relative to the problem's own size).
-Targets below ``(exact_rtol * c)^2`` (in particular ``mu = 0``) are raised to that floor, the
-finest central path double precision resolves for this problem; ``result.mu_target`` reports
-the raised value.
+(``scale = c (1 + max(|F' lam'|_inf, |s'|_inf))``: relative to the problem's own size), that is
+``|lam_i s_i - mu_i| <= tol mu_i + gap_atol`` for every contact. The absolute part is what double
+precision resolves in this problem: ``gap_atol = c^2 (exact_tol^2 + 1e-13 max_j mu_j / c^2)``;
+roundoff in a contact held at a large mu_j couples into the others at about eps * mu_j. For
+``mu = 0`` (exact contact) it is the complementarity tolerance; targets below
+``(exact_tol * c)^2`` are raised to that floor and ``result.mu_target`` reports the raised value.
 """
 
 from __future__ import annotations
@@ -204,7 +207,7 @@ def solve_lcp(
     jacobians: bool = False,
     tol: float = 1e-12,
     max_iterations: int = 100,
-    exact_rtol: float = 1e-15,
+    exact_tol: float = 1e-15,
     strict: bool = False,
     on_bad_matrix: OnBadMatrix = "raise",
     warm_start: tuple[np.ndarray, np.ndarray] | None = None,
@@ -219,7 +222,8 @@ def solve_lcp(
         jacobians: also return ``dlam_dq`` and ``dlam_dmu`` (MATH.md section 4).
         tol: relative tolerance on the primal residual and on ``lam_i s_i / mu_i - 1``.
         max_iterations: iteration limit; problems that hit it are flagged, not hidden.
-        exact_rtol: targets are floored at ``(exact_rtol * c)^2``, ``c = max|q_i| / sqrt(F_ii)``.
+        exact_tol: relative accuracy of exact contacts: targets are floored at
+            ``(exact_tol * c)^2`` with ``c = max|q_i| / sqrt(F_ii)`` (see the module docstring).
         strict: raise :class:`LCPConvergenceError` instead of warning when a problem does not
             converge.
         on_bad_matrix: what to do when F is neither PSD nor a (verifiable) P-matrix: ``"raise"``
@@ -269,7 +273,11 @@ def solve_lcp(
     cmax = np.max(np.abs(qd), axis=1)
     c = np.exp2(np.round(np.log2(np.where(cmax > 0, cmax, 1.0))))
     qs = qd / c[:, None]
-    mu_s = np.maximum(mu_full / (c * c)[:, None], exact_rtol * exact_rtol)
+    floor = exact_tol * exact_tol
+    mu_s = np.maximum(mu_full / (c * c)[:, None], floor)
+    # what double precision resolves of lam_i s_i here (scaled units), see the module docstring
+    gap_atol = (floor + 1e-13 * mu_s.max(axis=1))[:, None]
+    gap_scale = mu_s + gap_atol / tol
 
     if warm_start is None:
         start = np.maximum(1.0, np.sqrt(mu_s.max(axis=1)))[:, None]
@@ -292,13 +300,13 @@ def solve_lcp(
     for k in range(max_iterations + 1):
         L, S = lam[active], s[active]
         Fa = Fs if shared else Fs[active]
-        qa, ma = qs[active], mu_s[active]
+        qa, ma, ga = qs[active], mu_s[active], gap_scale[active]
         FL = _matvec(Fa, L)
         rp = S - FL - qa
         pscale = 1.0 + np.maximum(np.abs(FL).max(axis=1), np.abs(S).max(axis=1))
         res_p = np.abs(rp).max(axis=1) / pscale
         gap = L * S
-        res = np.maximum(res_p, np.abs(gap / ma - 1.0).max(axis=1))
+        res = np.maximum(res_p, (np.abs(gap - ma) / ga).max(axis=1))
         residual[active] = res
         done = res <= tol
         if np.any(done):
@@ -307,7 +315,7 @@ def solve_lcp(
         if k == max_iterations or np.all(done):
             break
         keep = ~done
-        active, L, S, qa, ma, rp, gap = (a[keep] for a in (active, L, S, qa, ma, rp, gap))
+        active, L, S, qa, ma, ga, rp, gap = (a[keep] for a in (active, L, S, qa, ma, ga, rp, gap))
         res_p = res_p[keep]
         if not shared:
             Fa = Fa[keep]
@@ -326,7 +334,7 @@ def solve_lcp(
             a_aff = np.minimum(1.0, np.minimum(_max_step(L, dl_aff), _max_step(S, ds_aff)))
             gap_aff = (L + a_aff[:, None] * dl_aff) * (S + a_aff[:, None] * ds_aff)
             # contacts still above their own target drive the duality measure down
-            drive = gap > ma * (1.0 + tol)
+            drive = gap - ma > tol * ga
             n_drive = np.maximum(drive.sum(axis=1), 1)
             mu_cur = np.where(drive, gap, 0.0).sum(axis=1) / n_drive
             mu_aff = np.where(drive, gap_aff, 0.0).sum(axis=1) / n_drive
