@@ -41,6 +41,7 @@ The numbers printed are also written as JSON (default ``results/bench_lcp.json``
 from __future__ import annotations
 
 import argparse
+import hashlib
 import importlib.metadata
 import json
 import os
@@ -56,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+import drake_abs.ipm
 from drake_abs import solve_lcp
 
 SEED = 20250101
@@ -589,6 +591,7 @@ def metadata(cfg: Config) -> dict[str, Any]:
         "python": platform.python_version(),
         "numpy": np.__version__,
         "drake": drake_version,
+        "ipm_sha256": hashlib.sha256(Path(drake_abs.ipm.__file__).read_bytes()).hexdigest()[:12],
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
     }
@@ -610,7 +613,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     meta = metadata(cfg)
     print(
         f"bench_lcp ({cfg.name}): seed {SEED}, numpy {meta['numpy']}, drake {meta['drake']}, "
-        f"python {meta['python']}, {meta['cpu_count']} CPU(s)"
+        f"python {meta['python']}, {meta['cpu_count']} CPU(s), drake_abs/ipm.py sha256 "
+        f"{meta['ipm_sha256']}"
     )
     log = WarningLog()
     results: dict[str, Any] = {"meta": meta}
