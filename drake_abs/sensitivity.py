@@ -27,21 +27,40 @@ def jacobi_scale(F: np.ndarray) -> np.ndarray:
 
 
 def batched_inverse(M: np.ndarray) -> np.ndarray:
-    """Inverse of a stack of square matrices (..., d, d), with closed forms for d = 1 and 2."""
+    """Inverse of a stack of square matrices (..., d, d), with closed forms for d = 1 and 2.
+
+    Members that are singular to working precision get the Moore-Penrose pseudo-inverse instead
+    (non-P LCP matrices can make the Newton matrix singular); callers that need a true inverse
+    must check their own residuals, as the interior-point solver does.
+    """
     d = M.shape[-1]
-    if d == 1:
-        return 1.0 / M
-    if d == 2:
-        a, b = M[..., 0, 0], M[..., 0, 1]
-        c, e = M[..., 1, 0], M[..., 1, 1]
-        det = a * e - b * c
-        out = np.empty_like(M)
-        out[..., 0, 0] = e / det
-        out[..., 0, 1] = -b / det
-        out[..., 1, 0] = -c / det
-        out[..., 1, 1] = a / det
-        return out
-    return np.linalg.inv(M)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if d == 1:
+            out = 1.0 / M
+        elif d == 2:
+            a, b = M[..., 0, 0], M[..., 0, 1]
+            c, e = M[..., 1, 0], M[..., 1, 1]
+            det = a * e - b * c
+            out = np.empty_like(M)
+            out[..., 0, 0] = e / det
+            out[..., 0, 1] = -b / det
+            out[..., 1, 0] = -c / det
+            out[..., 1, 1] = a / det
+        else:
+            try:
+                out = np.linalg.inv(M)
+            except np.linalg.LinAlgError:
+                out = np.full_like(M, np.nan)
+                flat, flat_out = M.reshape(-1, d, d), out.reshape(-1, d, d)
+                for i, Mi in enumerate(flat):
+                    try:
+                        flat_out[i] = np.linalg.inv(Mi)
+                    except np.linalg.LinAlgError:
+                        pass
+    singular = ~np.all(np.isfinite(out), axis=(-2, -1))
+    if np.any(singular):
+        out[singular] = np.linalg.pinv(np.where(np.isfinite(M[singular]), M[singular], 0.0))
+    return out
 
 
 def implicit_jacobians(

@@ -1,0 +1,111 @@
+"""The LcsPlant Drake system: AutoDiffXd gradients of whole diagrams against the core's analytic
+chain rule and against central finite differences of the double diagram."""
+
+import numpy as np
+import pytest
+from numdiff import central_difference
+from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
+from pydrake.systems.analysis import Simulator, Simulator_
+
+from drake_abs import ContactAware, Exact, Fixed, GaussianMatched, point_mass_lcs, rollout
+from drake_abs.diagrams import make_lcs_diagram, simulate_with_gradient
+from drake_abs.systems import LcsPlant, autodiff
+
+H = 0.01
+
+
+def simulate_double(diagram, x0, n, plant_name="lcs"):
+    simulator = Simulator(diagram)
+    plant = diagram.GetSubsystemByName(plant_name)
+    context = simulator.get_mutable_context()
+    plant.SetInitialState(plant.GetMyMutableContextFromRoot(context), x0)
+    simulator.AdvanceTo(n * H)
+    return plant.state_port.Eval(plant.GetMyContextFromRoot(context)).copy()
+
+
+def test_plant_converts_to_autodiff_and_keeps_its_parameters():
+    lcs = point_mass_lcs(2, time_step=H)
+    plant = LcsPlant(lcs, H, Fixed(1e-3), "total")
+    ad = plant.ToAutoDiffXd()
+    assert ad.lcs is lcs and ad.smoothing == Fixed(1e-3) and ad.gradient == "total"
+    assert [ad.get_output_port(i).get_name() for i in range(3)] == ["state", "lam", "mu"]
+
+
+@pytest.mark.parametrize(
+    "policy",
+    [Exact(), Fixed(1e-3), ContactAware(1e-2, 0.05, 1e-9), GaussianMatched(0.02)],
+    ids=repr,
+)
+@pytest.mark.parametrize("gradient", ["frozen", "total"])
+def test_diagram_gradient_matches_chain_rule_and_finite_differences(policy, gradient):
+    lcs = point_mass_lcs(2, time_step=H)
+    x0 = np.array([0.0, 0.25, 1.0, 0.3])  # thrown up, lands around step 30
+    u = np.array([0.2, -1.0])
+    n = 45
+    diagram = make_lcs_diagram(lcs, H, policy, gradient=gradient, u=u)
+    g = simulate_with_gradient(diagram, x0, n)
+    core = rollout(lcs, x0, np.tile(u, (n, 1)), policy, gradient=gradient)
+    assert core.converged.all()
+    assert core.lam.max() > 0.1  # the rollout does go through an impact
+    # the same step code: identical to the last bit
+    np.testing.assert_array_equal(g.x_final, core.x[0, -1])
+    np.testing.assert_allclose(g.dx_final_dx0, core.dxN_dx0[0], rtol=1e-12, atol=1e-12)
+    if gradient == "total":  # FD differentiates mu(x) as well, i.e. the total gradient
+        fd = central_difference(lambda x: simulate_double(diagram, x, n), x0, eps=1e-7)
+        np.testing.assert_allclose(g.dx_final_dx0, fd, atol=1e-5 * (1 + np.abs(fd).max()))
+
+
+def test_gradient_with_respect_to_the_input_port():
+    """Derivatives seeded on the input port flow through the plant: d x_N / d u for a constant u
+    equals the sum over steps of the core's per-step input Jacobians."""
+    lcs = point_mass_lcs(2, time_step=H)
+    x0 = np.array([0.0, 0.2, 1.0, 0.0])
+    u = np.array([0.5, -2.0])
+    n = 30
+    diagram = make_lcs_diagram(lcs, H, Fixed(1e-4))  # input port exported
+    ad = diagram.ToAutoDiffXd()
+    simulator = Simulator_[AutoDiffXd](ad)
+    context = simulator.get_mutable_context()
+    plant = ad.GetSubsystemByName("lcs")
+    x_ad = InitializeAutoDiff(x0.reshape(-1, 1), np.zeros((4, 2))).ravel()
+    plant.SetInitialState(plant.GetMyMutableContextFromRoot(context), x_ad)
+    ad.get_input_port(0).FixValue(context, InitializeAutoDiff(u.reshape(-1, 1)).ravel())
+    simulator.AdvanceTo(n * H)
+    (xN,), (grad,) = autodiff.split([plant.state_port.Eval(plant.GetMyContextFromRoot(context))])
+    core = rollout(lcs, x0, np.tile(u, (n, 1)), Fixed(1e-4))
+    np.testing.assert_allclose(grad, core.dxN_du[0].sum(axis=0), rtol=1e-10, atol=1e-12)
+
+    def final(uu):
+        simulator_d = Simulator(diagram)
+        ctx = simulator_d.get_mutable_context()
+        p = diagram.GetSubsystemByName("lcs")
+        p.SetInitialState(p.GetMyMutableContextFromRoot(ctx), x0)
+        diagram.get_input_port(0).FixValue(ctx, uu)
+        simulator_d.AdvanceTo(n * H)
+        return p.state_port.Eval(p.GetMyContextFromRoot(ctx)).copy()
+
+    fd = central_difference(final, u, eps=1e-6)
+    np.testing.assert_allclose(grad, fd, atol=1e-6 * (1 + np.abs(fd).max()))
+
+
+def test_lam_and_mu_ports_carry_the_last_step():
+    lcs = point_mass_lcs(1, time_step=H)
+    diagram = make_lcs_diagram(lcs, H, Fixed(1e-3), u=np.zeros(1))
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant = diagram.GetSubsystemByName("lcs")
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    plant.SetInitialState(plant_context, np.array([0.0, 0.0]))  # resting on the ground
+    simulator.AdvanceTo(10 * H)
+    lam = plant.lam_port.Eval(plant_context)
+    mu = plant.mu_port.Eval(plant_context)
+    assert lam[0] == pytest.approx(9.81 * H, rel=1e-3)  # the impulse that holds the ball up
+    assert mu[0] == pytest.approx(1e-3, rel=1e-9)
+
+
+def test_bad_construction_arguments():
+    lcs = point_mass_lcs(2)
+    with pytest.raises(ValueError, match="time_step must be a finite number > 0"):
+        LcsPlant(lcs, -1.0)
+    with pytest.raises(ValueError, match="gradient must be 'frozen' or 'total'"):
+        LcsPlant(lcs, H, None, "full")
