@@ -127,10 +127,8 @@ def _matvec(F: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def _max_step(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-    """Largest a with x + a dx >= 0, per row (inf when dx >= 0)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(dx < 0, -x / dx, np.inf)
-    return ratio.min(axis=-1)
+    """Largest a with x + a dx >= 0, per row (inf when dx >= 0). Call under np.errstate."""
+    return np.where(dx < 0, -x / dx, np.inf).min(axis=-1)
 
 
 #: Wide-neighbourhood constant: contacts still driving down keep lam_i s_i >= GAMMA * mean.
@@ -233,6 +231,113 @@ def apply_matrix_policy(
     return F, delta, classes.astype(np.int8)
 
 
+def _interior_point(
+    Fs: np.ndarray,
+    qs: np.ndarray,
+    mu_s: np.ndarray,
+    gap_scale: np.ndarray,
+    lam: np.ndarray,
+    s: np.ndarray,
+    tol: float,
+    max_iterations: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The iterations of the module docstring on the scaled problem, updating ``lam`` and ``s``
+    (B, d) in place. Returns ``(lam, s, status, iterations, residual)``."""
+    B, d = qs.shape
+    status = np.full(B, LCPStatus.MAX_ITERATIONS, dtype=np.int8)
+    iterations = np.full(B, max_iterations, dtype=np.int64)
+    residual = np.full(B, np.inf)
+    best_mu = np.full(B, np.inf)
+    stalls = np.zeros(B, dtype=np.int64)
+    no_corr = np.zeros(B, dtype=bool)
+    active = np.arange(B)
+    shared = Fs.ndim == 2
+    # size of the terms summed in F' lam' (a backward-error scale for the primal residual)
+    Fs_norm = np.abs(Fs).max(axis=-1)
+    saved_err = np.seterr(all="ignore")  # inf and nan are caught by the checks below
+    try:
+        for k in range(max_iterations + 1):
+            L, S = lam[active], s[active]
+            Fa = Fs if shared else Fs[active]
+            qa, ma, ga = qs[active], mu_s[active], gap_scale[active]
+            FL = _matvec(Fa, L)
+            rp = S - FL - qa
+            Fn = Fs_norm if shared else Fs_norm[active]
+            terms = np.maximum(np.abs(S), Fn * np.abs(L).max(axis=1, keepdims=True))
+            pscale = 1.0 + terms.max(axis=1)
+            res_p = np.abs(rp).max(axis=1) / pscale
+            gap = L * S
+            res = np.maximum(res_p, (np.abs(gap - ma) / ga).max(axis=1))
+            residual[active] = res
+            done = res <= tol
+            if done.any():
+                status[active[done]] = LCPStatus.CONVERGED
+                iterations[active[done]] = k
+            if k == max_iterations or done.all():
+                break
+            keep = ~done
+            active, L, S, qa, ma, ga, rp, gap = (
+                a[keep] for a in (active, L, S, qa, ma, ga, rp, gap)
+            )
+            res_p = res_p[keep]
+            if not shared:
+                Fa = Fa[keep]
+            # The primal residual, once within tolerance, is roundoff: do not chase it.
+            rp = np.where((res_p <= tol)[:, None], 0.0, rp)
+
+            # Newton matrix K = S + Lam F with its rows equilibrated by 1 / (s + lam): every row
+            # is O(1) whether the contact is far (s >> lam) or deep (lam >> s), so pivoting is
+            # reliable when s / lam spans many decades.
+            Kinv, w = equilibrated_newton_inverse(Fa, L, S)
+            Lrp = L * rp
+            # predictor (affine scaling) direction: target lam o s = 0
+            dl_aff = _solve(Kinv, (Lrp - gap) * w)
+            ds_aff = _matvec(Fa, dl_aff) - rp
+            a_aff = np.minimum(1.0, np.minimum(_max_step(L, dl_aff), _max_step(S, ds_aff)))
+            gap_aff = (L + a_aff[:, None] * dl_aff) * (S + a_aff[:, None] * ds_aff)
+            # contacts still above their own target drive the duality measure down
+            drive = gap - ma > tol * ga
+            n_drive = np.maximum(drive.sum(axis=1), 1)
+            mu_cur = np.where(drive, gap, 0.0).sum(axis=1) / n_drive
+            mu_aff = np.where(drive, gap_aff, 0.0).sum(axis=1) / n_drive
+            ratio = np.minimum(mu_aff / mu_cur, 1.0)
+            sigma = np.where(mu_cur > 0, ratio * ratio * ratio, 0.0)
+            target = np.maximum((sigma * mu_cur)[:, None], ma)
+            # Safeguard: Mehrotra's second-order correction can cycle on ill-conditioned
+            # problems; a problem whose driving duality measure has not fallen below half its
+            # best value for three iterations in a row continues without the correction.
+            stalled = mu_cur > 0.5 * best_mu[active]
+            stalls[active] = np.where(stalled, stalls[active] + 1, 0)
+            best_mu[active] = np.where(stalled, best_mu[active], mu_cur)
+            use_corr = (stalls[active] < 3) & ~no_corr[active]
+            no_corr[active] |= ~use_corr
+            corr = np.where((target > ma) & use_corr[:, None], dl_aff * ds_aff, 0.0)
+            rc = gap - target + corr
+            dl = _solve(Kinv, (Lrp - rc) * w)
+            ds = _matvec(Fa, dl) - rp
+            a_max = np.minimum(_max_step(L, dl), _max_step(S, ds))
+            alpha = np.minimum(1.0, 0.995 * a_max)
+            if d > 1:
+                alpha = _neighbourhood_step(L, S, dl, ds, alpha, drive, ma)
+            alpha = alpha[:, None]
+            L_new = L + alpha * dl
+            S_new = S + alpha * ds
+            # positive and finite (NaN fails both comparisons)
+            ok = ((L_new > 0) & (S_new > 0) & (L_new < np.inf) & (S_new < np.inf)).all(axis=1)
+            if not ok.all():
+                failed = active[~ok]
+                status[failed] = LCPStatus.NUMERICAL_FAILURE
+                iterations[failed] = k
+            lam[active[ok]] = L_new[ok]
+            s[active[ok]] = S_new[ok]
+            active = active[ok]
+            if active.size == 0:
+                break
+    finally:
+        np.seterr(**saved_err)
+    return lam, s, status, iterations, residual
+
+
 def solve_lcp(
     F,
     q,
@@ -325,97 +430,9 @@ def solve_lcp(
         lam = lam0 * D / c[:, None]
         s = s0 / (D * c[:, None])
 
-    status = np.full(B, LCPStatus.MAX_ITERATIONS, dtype=np.int8)
-    iterations = np.full(B, max_iterations, dtype=np.int64)
-    residual = np.full(B, np.inf)
-    best_mu = np.full(B, np.inf)
-    stalls = np.zeros(B, dtype=np.int64)
-    no_corr = np.zeros(B, dtype=bool)
-    active = np.arange(B)
-    shared = Fs.ndim == 2
-    # size of the terms summed in F' lam' (a backward-error scale for the primal residual)
-    Fs_norm = np.abs(Fs).max(axis=-1)
-
-    for k in range(max_iterations + 1):
-        L, S = lam[active], s[active]
-        Fa = Fs if shared else Fs[active]
-        qa, ma, ga = qs[active], mu_s[active], gap_scale[active]
-        FL = _matvec(Fa, L)
-        rp = S - FL - qa
-        Fn = Fs_norm if shared else Fs_norm[active]
-        terms = np.maximum(np.abs(S), Fn * np.abs(L).max(axis=1, keepdims=True))
-        pscale = 1.0 + terms.max(axis=1)
-        res_p = np.abs(rp).max(axis=1) / pscale
-        gap = L * S
-        res = np.maximum(res_p, (np.abs(gap - ma) / ga).max(axis=1))
-        residual[active] = res
-        done = res <= tol
-        if np.any(done):
-            status[active[done]] = LCPStatus.CONVERGED
-            iterations[active[done]] = k
-        if k == max_iterations or np.all(done):
-            break
-        keep = ~done
-        active, L, S, qa, ma, ga, rp, gap = (a[keep] for a in (active, L, S, qa, ma, ga, rp, gap))
-        res_p = res_p[keep]
-        if not shared:
-            Fa = Fa[keep]
-        # The primal residual, once within tolerance, is roundoff: do not chase it.
-        rp = np.where((res_p <= tol)[:, None], 0.0, rp)
-
-        with np.errstate(all="ignore"):
-            # Newton matrix K = S + Lam F with its rows equilibrated by 1 / (s + lam): every row
-            # is O(1) whether the contact is far (s >> lam) or deep (lam >> s), so pivoting is
-            # reliable when s / lam spans many decades.
-            Kinv, w = equilibrated_newton_inverse(Fa, L, S)
-            Lrp = L * rp
-            # predictor (affine scaling) direction: target lam o s = 0
-            dl_aff = _solve(Kinv, (Lrp - gap) * w)
-            ds_aff = _matvec(Fa, dl_aff) - rp
-            a_aff = np.minimum(1.0, np.minimum(_max_step(L, dl_aff), _max_step(S, ds_aff)))
-            gap_aff = (L + a_aff[:, None] * dl_aff) * (S + a_aff[:, None] * ds_aff)
-            # contacts still above their own target drive the duality measure down
-            drive = gap - ma > tol * ga
-            n_drive = np.maximum(drive.sum(axis=1), 1)
-            mu_cur = np.where(drive, gap, 0.0).sum(axis=1) / n_drive
-            mu_aff = np.where(drive, gap_aff, 0.0).sum(axis=1) / n_drive
-            sigma = np.clip(np.where(mu_cur > 0, mu_aff / mu_cur, 0.0), 0.0, 1.0) ** 3
-            target = np.maximum((sigma * mu_cur)[:, None], ma)
-            # Safeguard: Mehrotra's second-order correction can cycle on ill-conditioned
-            # problems; a problem whose driving duality measure has not fallen below half its
-            # best value for three iterations in a row continues without the correction.
-            stalled = mu_cur > 0.5 * best_mu[active]
-            stalls[active] = np.where(stalled, stalls[active] + 1, 0)
-            best_mu[active] = np.where(stalled, best_mu[active], mu_cur)
-            use_corr = (stalls[active] < 3) & ~no_corr[active]
-            no_corr[active] |= ~use_corr
-            corr = np.where((target > ma) & use_corr[:, None], dl_aff * ds_aff, 0.0)
-            rc = gap - target + corr
-            dl = _solve(Kinv, (Lrp - rc) * w)
-            ds = _matvec(Fa, dl) - rp
-            a_max = np.minimum(_max_step(L, dl), _max_step(S, ds))
-            alpha = np.minimum(1.0, 0.995 * a_max)
-            if d > 1:
-                alpha = _neighbourhood_step(L, S, dl, ds, alpha, drive, ma)
-            alpha = alpha[:, None]
-            L_new = L + alpha * dl
-            S_new = S + alpha * ds
-        ok = (
-            np.all(np.isfinite(L_new), axis=1)
-            & np.all(np.isfinite(S_new), axis=1)
-            & np.all(L_new > 0, axis=1)
-            & np.all(S_new > 0, axis=1)
-        )
-        if not np.all(ok):
-            failed = active[~ok]
-            status[failed] = LCPStatus.NUMERICAL_FAILURE
-            iterations[failed] = k
-        lam[active[ok]] = L_new[ok]
-        s[active[ok]] = S_new[ok]
-        active = active[ok]
-        if active.size == 0:
-            break
-
+    lam, s, status, iterations, residual = _interior_point(
+        Fs, qs, mu_s, gap_scale, lam, s, tol, max_iterations
+    )
     converged = status == LCPStatus.CONVERGED
     lam_out = lam * c[:, None] / D
     s_out = s * c[:, None] * D

@@ -91,7 +91,12 @@ def equilibrated_newton_inverse(
     ``((diag(w) K)^-1, w)``; then ``K^-1 = (diag(w) K)^-1 diag(w)``. Shapes (B, d, d), (B, d).
     """
     w = 1.0 / (slack + lam)
-    K = np.broadcast_to(F, lam.shape[:-1] + F.shape[-2:]) * (lam * w)[..., :, None]
+    if lam.shape[-1] == 1:  # one contact: a scalar per problem
+        Fd = F[..., 0, :] if F.ndim == lam.ndim + 1 else F[0]
+        with np.errstate(divide="ignore"):
+            inv = 1.0 / ((slack + lam * Fd) * w)
+        return np.where(np.isfinite(inv), inv, 0.0)[..., None], w  # pseudo-inverse of 0 is 0
+    K = F * (lam * w)[..., :, None]
     idx = np.arange(lam.shape[-1])
     K[..., idx, idx] += slack * w
     return batched_inverse(K), w
