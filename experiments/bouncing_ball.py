@@ -143,64 +143,64 @@ def run(out_dir: str | Path, config: BouncingBallConfig | None = None) -> dict:
 
 
 def _plots(out: Path, config, trajectories, jac) -> dict[str, Path]:
-    from drake_abs.diagrams.point_mass_scene import palette
-
-    files = {}
-    names = list(trajectories)
-    styles = {n: {"color": palette(i), "lw": 2.2 if i == 0 else 1.5} for i, n in enumerate(names)}
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for n in names:
-        xs = trajectories[n]
-        ax.plot(xs[:, 0], xs[:, 3], label=n, **styles[n])
-    ax.set(xlabel="x (m)", ylabel="v_y (m/s)", title="Vertical velocity along the throw (Fig. 2a)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    files["vy_vs_x"] = _save(fig, out / "vy_vs_x.png")
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for n in names:
-        xs = trajectories[n]
-        xm = 0.5 * (xs[1:, 0] + xs[:-1, 0])
-        ax.plot(xm, np.diff(xs[:, 3]) / np.diff(xs[:, 0]), label=n, **styles[n])
-    ax.set(xlabel="x (m)", ylabel="d v_y / d x (1/s)", title="Derivative along the throw (Fig. 2b)")
-    ax.set_yscale("symlog", linthresh=20.0)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    files["dvy_dx"] = _save(fig, out / "dvy_dx.png")
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for n in names:
-        xs = trajectories[n]
-        ax.plot(xs[:-1, 0], np.abs(jac[n][:, 3, 1]) + 1e-16, label=n, **styles[n])
-    ax.set(
-        xlabel="x (m)",
-        ylabel="|d v_y+ / d y| (1/s)",
-        title="Implicit one-step Jacobian (stiffness)",
-        yscale="log",
-        ylim=(1e-6, 10.0 / config.time_step),
-    )
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    files["step_jacobian"] = _save(fig, out / "step_jacobian.png")
-
     z = np.linspace(-0.1, 0.1, 801)
     curves = contact_impulse_curves(config, z)
+
+    def along(xs, ys):
+        return xs[: len(ys), 0], ys
+
+    series = {
+        "vy_vs_x": {n: along(xs, xs[:, 3]) for n, xs in trajectories.items()},
+        "dvy_dx": {
+            n: (0.5 * (xs[1:, 0] + xs[:-1, 0]), np.diff(xs[:, 3]) / np.diff(xs[:, 0]))
+            for n, xs in trajectories.items()
+        },
+        "step_jacobian": {
+            n: along(xs, np.abs(jac[n][:, 3, 1]) + 1e-16) for n, xs in trajectories.items()
+        },
+        "contact_impulse": {n: (z, curves[n]) for n in trajectories},
+    }
+    axes = {
+        "vy_vs_x": {
+            "xlabel": "x (m)",
+            "ylabel": "v_y (m/s)",
+            "title": "Vertical velocity along the throw (Fig. 2a)",
+        },
+        "dvy_dx": {
+            "xlabel": "x (m)",
+            "ylabel": "d v_y / d x (1/s)",
+            "title": "Derivative along the throw (Fig. 2b)",
+            "yscale": "symlog",
+        },
+        "step_jacobian": {
+            "xlabel": "x (m)",
+            "ylabel": "|d v_y+ / d y| (1/s)",
+            "title": "Implicit one-step Jacobian (stiffness)",
+            "yscale": "log",
+            "ylim": (1e-6, 10.0 / config.time_step),
+        },
+        "contact_impulse": {
+            "xlabel": "contact distance z (m)",
+            "ylabel": "impulse lam (N s)",
+            "title": "Contact impulse against distance (Fig. 1d)",
+        },
+    }
+    return {name: _line_plot(out / f"{name}.png", series[name], axes[name]) for name in series}
+
+
+def _line_plot(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], axes: dict) -> Path:
+    """One figure, one line per case in the shared palette (case 0, Exact, drawn thicker)."""
+    from drake_abs.diagrams.point_mass_scene import palette
+
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for n in names:
-        ax.plot(z, curves[n], label=n, **styles[n])
-    ax.set(
-        xlabel="contact distance z (m)",
-        ylabel="impulse lam (N s)",
-        title="Contact impulse against distance (Fig. 1d)",
-    )
+    for i, (name, (x, y)) in enumerate(curves.items()):
+        ax.plot(x, y, label=name, color=palette(i), lw=2.2 if i == 0 else 1.5)
+    if axes.get("yscale") == "symlog":
+        ax.set_yscale("symlog", linthresh=20.0)
+        axes = {k: v for k, v in axes.items() if k != "yscale"}
+    ax.set(**axes)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    files["contact_impulse"] = _save(fig, out / "contact_impulse.png")
-    return files
-
-
-def _save(fig, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
