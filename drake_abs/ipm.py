@@ -28,18 +28,19 @@ second-order correction, which otherwise can cycle. Known limit: with cond(F) ~ 
 problem in 10^4 still cycles along F's near-null direction and is reported as not converged
 (measured on random problems, see tests/test_extremes.py).
 
-Convergence of a problem means ``residual <= tol`` where
+Convergence of a problem means ``residual <= tol`` where, in the scaled variables,
 
-    residual = max( |s - F lam - q|_inf / scale,
-                    max_i |lam_i s_i - mu_i| / (mu_i + gap_atol / tol) )
+    residual = max( max_i |s_i - (F lam)_i - q_i| / (|q_i| + |s_i| + (|F| |lam|)_i),
+                    max_i |lam_i s_i - mu_i| / (mu_i + gap_atol_i / tol) )
 
-(``scale = c (1 + max(|s'|_inf, max_i max_j |F'_ij| |lam'|_inf))``, the size of the terms
-summed, so that the measure is relative to the problem's own size), that is
-``|lam_i s_i - mu_i| <= tol mu_i + gap_atol`` for every contact. The absolute part is what double
-precision resolves in this problem: ``gap_atol = c^2 (exact_tol^2 + 1e-13 max_j mu_j / c^2)``;
-roundoff in a contact held at a large mu_j couples into the others at about eps * mu_j. For
-``mu = 0`` (exact contact) it is the complementarity tolerance; targets below
-``(exact_tol * c)^2`` are raised to that floor and ``result.mu_target`` reports the raised value.
+The first term is the backward error of each row (relative to the size of the terms summed in
+it, so that one diverging contact cannot hide another's residual); the second says
+``|lam_i s_i - mu_i| <= tol mu_i + gap_atol_i``. The absolute part is what double precision
+resolves: ``gap_atol_i = exact_tol^2 + 1e-13 max {mu_j : F_ij != 0 or F_ji != 0, j != i}`` (scaled
+units), i.e. the exact floor plus the roundoff that a contact held at a large mu_j couples into
+contact i through F (zero for contacts F does not couple). For ``mu = 0`` (exact contact) it is
+the complementarity tolerance; targets below the floor ``(exact_tol * c)^2`` (original units)
+are raised to it and ``result.mu_target`` reports the raised value.
 """
 
 from __future__ import annotations
@@ -130,6 +131,8 @@ def _max_step(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     """Largest a with x + a dx >= 0, per row (inf when dx >= 0). Call under np.errstate."""
     return np.where(dx < 0, -x / dx, np.inf).min(axis=-1)
 
+
+_TINY = np.finfo(float).tiny
 
 #: Wide-neighbourhood constant: contacts still driving down keep lam_i s_i >= GAMMA * mean.
 GAMMA = 1e-3
@@ -231,6 +234,17 @@ def apply_matrix_policy(
     return F, delta, classes.astype(np.int8)
 
 
+def _gap_atol(Fs: np.ndarray, mu_s: np.ndarray, floor: float) -> np.ndarray:
+    """What double precision resolves of lam_i s_i (scaled units, (B, d)): the exact floor plus
+    roundoff coupled in from the contacts that F couples to contact i, about eps * mu_j."""
+    coupled = (Fs != 0) | (np.swapaxes(Fs, -1, -2) != 0)
+    d = Fs.shape[-1]
+    coupled = coupled & ~np.eye(d, dtype=bool)
+    coupled = np.broadcast_to(coupled, mu_s.shape[:1] + (d, d))
+    neighbour_mu = np.where(coupled, mu_s[:, None, :], 0.0).max(axis=-1)
+    return floor + 1e-13 * neighbour_mu
+
+
 def _interior_point(
     Fs: np.ndarray,
     qs: np.ndarray,
@@ -252,8 +266,8 @@ def _interior_point(
     no_corr = np.zeros(B, dtype=bool)
     active = np.arange(B)
     shared = Fs.ndim == 2
-    # size of the terms summed in F' lam' (a backward-error scale for the primal residual)
-    Fs_norm = np.abs(Fs).max(axis=-1)
+    # |F'|: the size of the terms summed in row i of F' lam' (per-row backward error)
+    Fs_abs = np.abs(Fs)
     saved_err = np.seterr(all="ignore")  # inf and nan are caught by the checks below
     try:
         for k in range(max_iterations + 1):
@@ -262,10 +276,9 @@ def _interior_point(
             qa, ma, ga = qs[active], mu_s[active], gap_scale[active]
             FL = _matvec(Fa, L)
             rp = S - FL - qa
-            Fn = Fs_norm if shared else Fs_norm[active]
-            terms = np.maximum(np.abs(S), Fn * np.abs(L).max(axis=1, keepdims=True))
-            pscale = 1.0 + terms.max(axis=1)
-            res_p = np.abs(rp).max(axis=1) / pscale
+            Fa_abs = Fs_abs if shared else Fs_abs[active]
+            row_scale = np.abs(qa) + np.abs(S) + _matvec(Fa_abs, np.abs(L)) + _TINY
+            res_p = (np.abs(rp) / row_scale).max(axis=1)
             gap = L * S
             res = np.maximum(res_p, (np.abs(gap - ma) / ga).max(axis=1))
             residual[active] = res
@@ -359,7 +372,8 @@ def solve_lcp(
         mu: central-path value, >= 0; **larger is smoother** and 0 is the exact LCP. A scalar,
             one per problem (B,), or one per contact: (d,) for one problem, (B, d) for a batch.
         jacobians: also return ``dlam_dq`` and ``dlam_dmu`` (MATH.md section 4).
-        tol: relative tolerance on the primal residual and on ``lam_i s_i / mu_i - 1``.
+        tol: relative tolerance on each row's primal residual and on ``lam_i s_i`` against
+            ``mu_i`` (see the module docstring for the exact measure).
         max_iterations: iteration limit; problems that hit it are flagged, not hidden.
         exact_tol: relative accuracy of exact contacts: targets are floored at
             ``(exact_tol * c)^2`` with ``c = max|q_i| / sqrt(F_ii)`` (see the module docstring).
@@ -371,13 +385,17 @@ def solve_lcp(
         warm_start: optional ``(lam0, s0)`` of the same shape as q, strictly positive.
 
     Returns:
-        :class:`LCPResult`. No NaN is returned: a problem whose iterate became non-finite keeps
-        its last finite iterate and is flagged ``NUMERICAL_FAILURE``.
+        :class:`LCPResult`. A problem whose iterate became non-finite keeps its last finite
+        iterate and is flagged ``NUMERICAL_FAILURE``; so is one whose solution is not
+        representable in the original units (its entries may then be inf or 0, with
+        ``converged = False`` and ``residual = inf``).
     """
     if not (np.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be a positive finite number; got {tol!r}")
-    if int(max_iterations) < 1:
-        raise ValueError(f"max_iterations must be >= 1; got {max_iterations!r}")
+    if not isinstance(max_iterations, int | np.integer) or max_iterations < 1:
+        raise ValueError(f"max_iterations must be an integer >= 1; got {max_iterations!r}")
+    if not (np.isfinite(exact_tol) and 0 < exact_tol < 1):
+        raise ValueError(f"exact_tol must be a finite number in (0, 1); got {exact_tol!r}")
     if on_bad_matrix not in ("raise", "regularize", "attempt"):
         raise ValueError(
             f"on_bad_matrix must be 'raise', 'regularize' or 'attempt'; got {on_bad_matrix!r}"
@@ -413,18 +431,21 @@ def solve_lcp(
     c = np.exp2(np.round(np.log2(np.where(cmax > 0, cmax, 1.0))))
     qs = qd / c[:, None]
     floor = exact_tol * exact_tol
-    mu_s = np.maximum(mu_full / (c * c)[:, None], floor)
-    # what double precision resolves of lam_i s_i here (scaled units), see the module docstring
-    gap_atol = (floor + 1e-13 * mu_s.max(axis=1))[:, None]
-    gap_scale = mu_s + gap_atol / tol
+    with np.errstate(over="ignore"):  # c^2 = inf only for unrepresentable problems, flagged below
+        mu_s = np.maximum(mu_full / (c * c)[:, None], floor)
+    gap_scale = mu_s + _gap_atol(Fs, mu_s, floor) / tol
 
     if warm_start is None:
         start = np.maximum(1.0, np.sqrt(mu_s.max(axis=1)))[:, None]
         lam = np.repeat(start, d, axis=1)
         s = lam.copy()
     else:
-        lam0 = as_finite_array(warm_start[0], "warm_start[0]").reshape(Q.shape)
-        s0 = as_finite_array(warm_start[1], "warm_start[1]").reshape(Q.shape)
+        lam0 = as_finite_array(warm_start[0], "warm_start[0]")
+        s0 = as_finite_array(warm_start[1], "warm_start[1]")
+        for name, arr in (("warm_start[0]", lam0), ("warm_start[1]", s0)):
+            if arr.shape != q.shape:
+                raise ValueError(f"{name} must have the shape of q, {q.shape}; got {arr.shape}")
+        lam0, s0 = lam0.reshape(Q.shape), s0.reshape(Q.shape)
         if np.any(lam0 <= 0) or np.any(s0 <= 0):
             raise ValueError("warm_start (lam0, s0) must be strictly positive")
         lam = lam0 * D / c[:, None]
@@ -433,19 +454,30 @@ def solve_lcp(
     lam, s, status, iterations, residual = _interior_point(
         Fs, qs, mu_s, gap_scale, lam, s, tol, max_iterations
     )
-    converged = status == LCPStatus.CONVERGED
-    lam_out = lam * c[:, None] / D
-    s_out = s * c[:, None] * D
-    dlam_dq = dlam_dmu = None
-    if jacobians:
-        with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"):
+        lam_out = lam * c[:, None] / D
+        s_out = s * c[:, None] * D
+        mu_out = lam_out * s_out
+        mu_target = mu_s * (c * c)[:, None]
+        dlam_dq = dlam_dmu = None
+        if jacobians:
             dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
-        dlam_dmu = dlam_dmu_pc if mu_form == "per_contact" else dlam_dmu_pc.sum(axis=-1)
+            dlam_dmu = dlam_dmu_pc if mu_form == "per_contact" else dlam_dmu_pc.sum(axis=-1)
+    # A solution the scaled iterations found can still over- or underflow in original units
+    # (|q| near 1e155, F_ii near 1e-320): such problems are flagged, never passed as valid.
+    outputs = [lam_out, s_out, mu_out, mu_target] + ([dlam_dq, dlam_dmu] if jacobians else [])
+    finite = np.ones(B, dtype=bool)
+    for arr in outputs:
+        finite &= np.all(np.isfinite(arr.reshape(B, -1)), axis=1)
+    finite &= np.all(lam_out > 0, axis=1) & np.all(s_out > 0, axis=1)
+    status[~finite] = LCPStatus.NUMERICAL_FAILURE
+    residual[~finite] = np.inf
+    converged = status == LCPStatus.CONVERGED
     result = LCPResult(
         lam=lam_out,
         slack=s_out,
-        mu=lam_out * s_out,
-        mu_target=mu_s * (c * c)[:, None],
+        mu=mu_out,
+        mu_target=mu_target,
         iterations=iterations,
         converged=converged,
         status=status,

@@ -74,7 +74,8 @@ class LCS:
         arrays = {}
         for name in "ABCcDEFd":
             want = (1,) if name in "cd" else (2,)
-            arrays[name] = as_finite_array(getattr(self, name), f"LCS.{name}", ndim=want)
+            # a private copy: the LCS freezes its matrices, never the caller's arrays
+            arrays[name] = as_finite_array(getattr(self, name), f"LCS.{name}", ndim=want).copy()
         nx = arrays["A"].shape[0]
         nu = arrays["B"].shape[1]
         nc = arrays["F"].shape[0]
@@ -90,6 +91,12 @@ class LCS:
         }
         for name, (shape, form) in forms.items():
             check_shape(arrays[name], shape, f"LCS.{name}", form)
+        unknown = set(self.solver_options) - {"tol", "max_iterations", "exact_tol"}
+        if unknown:
+            raise ValueError(
+                "LCS.solver_options may set tol, max_iterations and exact_tol; "
+                f"got {sorted(unknown)}"
+            )
         # One matrix check here, so that every step can skip it.
         arrays["F"] = apply_matrix_policy(arrays["F"], self.on_bad_matrix)[0]
         for name, arr in arrays.items():

@@ -161,8 +161,8 @@ class GaussianMatched(SmoothingPolicy):
     ``E_w[max(0, -(z + w) / F)]`` for ``w ~ N(0, sigma^2)``: barrier smoothing that reproduces
     randomised smoothing in closed form. mu is large only near z = 0 and vanishes far from contact
     on both sides. **A larger sigma means more smoothing.** With several contacts each uses its own
-    diagonal entry F_ii (exact when F is diagonal). Negative kappa (possible with c1, c2 != 0) is
-    clipped to mu = 0.
+    diagonal entry F_ii > 0 (exact when F is diagonal). Where kappa or the matched slack
+    ``z + F_ii kappa`` is not positive (possible with c1, c2 != 0), mu = 0.
 
     Args:
         sigma: width of the matched Gaussian, in the units of z (> 0).
@@ -181,6 +181,11 @@ class GaussianMatched(SmoothingPolicy):
 
     def _parts(self, z: np.ndarray, F: np.ndarray):
         Fd = _diag(F, z.shape)
+        if np.any(Fd <= 0):
+            raise ValueError(
+                "GaussianMatched needs every diagonal entry F_ii > 0 (the contact's own "
+                f"compliance); got min F_ii = {float(np.min(Fd)):.3e}"
+            )
         t = z / self.sigma
         pdf = _INV_SQRT_2PI * np.exp(-0.5 * t * t)
         # E[max(0, -(z + w))] and E[max(0, z + w)], both without cancellation
@@ -192,13 +197,13 @@ class GaussianMatched(SmoothingPolicy):
 
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         _, _, kappa, slack = self._parts(z, F)
-        return np.maximum(kappa * slack, 0.0)
+        return np.where((kappa > 0) & (slack > 0), kappa * slack, 0.0)
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         Fd, t, kappa, slack = self._parts(z, F)
         dkappa = -ndtr(-t) / Fd + self.c1
         dmu = dkappa * slack + kappa * (1.0 + Fd * dkappa)
-        dmu = np.where(kappa * slack > 0, dmu, 0.0)
+        dmu = np.where((kappa > 0) & (slack > 0), dmu, 0.0)
         out = np.zeros(z.shape + z.shape[-1:])
         idx = np.arange(z.shape[-1])
         out[..., idx, idx] = dmu

@@ -16,13 +16,20 @@ def is_autodiff(arr: np.ndarray) -> bool:
 
 
 def split(arrays: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Values (n_i,) and gradients (n_i, k) of AutoDiffXd vectors, padded to a common k.
+    """Values (n_i,) and gradients (n_i, k) of AutoDiffXd vectors.
 
-    Vectors whose entries carry no derivatives get zero gradients of width k.
+    Vectors whose entries carry no derivatives get zero gradients of width k; non-empty
+    derivative vectors of different lengths raise ``ValueError`` (they cannot be combined).
     """
     values = [ExtractValue(a).ravel() if a.size else np.zeros(0) for a in arrays]
     grads = [ExtractGradient(a) if a.size else np.zeros((0, 0)) for a in arrays]
-    k = max((g.shape[1] for g in grads), default=0)
+    widths = {g.shape[1] for g in grads if g.shape[1] > 0}
+    if len(widths) > 1:
+        raise ValueError(
+            f"AutoDiffXd inputs carry derivative vectors of different lengths {sorted(widths)}; "
+            "seed every input with the same number of derivatives (as Drake requires)"
+        )
+    k = widths.pop() if widths else 0
     grads = [g if g.shape[1] == k else np.zeros((g.shape[0], k)) for g in grads]
     return values, grads
 

@@ -62,8 +62,17 @@ def test_wrong_shapes_and_values_say_what_is_expected(F, q, mu, message):
 def test_bad_options():
     with pytest.raises(ValueError, match="tol must be a positive finite number"):
         solve_lcp(F2, Q2, tol=0.0)
-    with pytest.raises(ValueError, match="max_iterations must be >= 1"):
+    with pytest.raises(ValueError, match="max_iterations must be an integer >= 1"):
         solve_lcp(F2, Q2, max_iterations=0)
+    with pytest.raises(ValueError, match="max_iterations must be an integer >= 1"):
+        solve_lcp(F2, Q2, max_iterations=2.5)
+    for bad in (np.nan, 0.0, -1.0, 1.5):
+        with pytest.raises(ValueError, match=r"exact_tol must be a finite number in \(0, 1\)"):
+            solve_lcp(F2, Q2, exact_tol=bad)
+    with pytest.raises(ValueError, match=r"warm_start\[0\] must have the shape of q, \(2,\)"):
+        solve_lcp(F2, Q2, warm_start=(np.ones(3), np.ones(2)))
+    with pytest.raises(ValueError, match=r"warm_start\[1\] must have the shape of q, \(3, 2\)"):
+        solve_lcp(F2, np.ones((3, 2)), warm_start=(np.ones((3, 2)), np.ones((2, 3))))
     with pytest.raises(ValueError, match="on_bad_matrix must be"):
         solve_lcp(F2, Q2, on_bad_matrix="ignore")
     with pytest.raises(ValueError, match="warm_start .* strictly positive"):
@@ -159,6 +168,20 @@ def test_lcs_validation_names_the_matrix():
         rollout(lcs, np.zeros(4), np.zeros((5, 3)))
     with pytest.raises(ValueError, match="time_step must be a finite number > 0"):
         point_mass_lcs(2, time_step=0.0)
+    with pytest.raises(ValueError, match=r"^x contains NaN or inf"):
+        lcs.step(np.array([0.0, np.nan, 0.0, 0.0]), np.zeros(2))
+    with pytest.raises(ValueError, match=r"^x0 contains NaN or inf"):
+        rollout(lcs, np.array([0.0, np.inf, 0.0, 0.0]), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match=r"solver_options may set tol.*\['jacobians'\]"):
+        LCS(**kwargs, solver_options={"jacobians": True})
+
+
+def test_lcs_does_not_freeze_the_callers_arrays():
+    A = np.eye(4)
+    lcs = point_mass_lcs(2)
+    LCS(**{**{k: getattr(lcs, k) for k in "BCcDEFd"}, "A": A})
+    assert A.flags.writeable
+    A[0, 0] = 2.0  # the caller's array stays theirs
 
 
 def test_policy_parameters_are_checked():
@@ -170,6 +193,17 @@ def test_policy_parameters_are_checked():
         ContactAware(mu_max=1.0, length=1.0, mu_min=2.0)
     with pytest.raises(ValueError, match="GaussianMatched.sigma must be a finite number > 0"):
         GaussianMatched(sigma=np.nan)
+    with pytest.raises(ValueError, match=r"GaussianMatched needs every diagonal entry F_ii > 0"):
+        GaussianMatched(sigma=0.1).mu(np.zeros((1, 2)), np.diag([1.0, 0.0]))
+
+
+def test_gaussian_matched_mu_is_zero_where_kappa_or_slack_is_not_positive():
+    # c2 = -1 makes both kappa and the matched slack negative near z = 0: mu must be 0, not > 0
+    policy = GaussianMatched(sigma=0.1, c2=-1.0)
+    z = np.array([[0.0], [0.05], [-0.05]])
+    F = np.array([[1.0]])
+    np.testing.assert_array_equal(policy.mu(z, F), 0.0)
+    np.testing.assert_array_equal(policy.dmu_dz(z, F), 0.0)
 
 
 def test_no_warning_when_everything_converges():

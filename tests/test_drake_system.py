@@ -109,3 +109,19 @@ def test_bad_construction_arguments():
         LcsPlant(lcs, -1.0)
     with pytest.raises(ValueError, match="gradient must be 'frozen' or 'total'"):
         LcsPlant(lcs, H, None, "full")
+
+
+def test_mismatched_derivative_widths_raise():
+    """x seeded with 4 derivatives and u with 2 cannot be combined: Drake's convention is to
+    throw, and so does the plant, instead of silently dropping u's derivatives."""
+    lcs = point_mass_lcs(2, time_step=H)
+    ad = make_lcs_diagram(lcs, H, Fixed(1e-4)).ToAutoDiffXd()
+    context = ad.CreateDefaultContext()
+    plant = ad.GetSubsystemByName("lcs")
+    x0 = np.array([0.0, 0.2, 1.0, 0.0])
+    plant.SetInitialState(
+        plant.GetMyMutableContextFromRoot(context), InitializeAutoDiff(x0.reshape(-1, 1)).ravel()
+    )
+    ad.get_input_port(0).FixValue(context, InitializeAutoDiff(np.zeros((2, 1))).ravel())
+    with pytest.raises(ValueError, match="derivative vectors of different lengths"):
+        ad.EvalUniquePeriodicDiscreteUpdate(context)
