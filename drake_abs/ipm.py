@@ -288,13 +288,13 @@ def _interior_point(
                 iterations[active[done]] = k
             if k == max_iterations or done.all():
                 break
-            keep = ~done
-            active, L, S, qa, ma, ga, rp, gap = (
-                a[keep] for a in (active, L, S, qa, ma, ga, rp, gap)
-            )
-            res_p = res_p[keep]
-            if not shared:
-                Fa = Fa[keep]
+            if done.any():  # drop the converged problems from the working set
+                keep = ~done
+                active, L, S, qa, ma, ga, rp, gap, res_p = (
+                    a[keep] for a in (active, L, S, qa, ma, ga, rp, gap, res_p)
+                )
+                if not shared:
+                    Fa = Fa[keep]
             # The primal residual, once within tolerance, is roundoff: do not chase it.
             rp = np.where((res_p <= tol)[:, None], 0.0, rp)
 
@@ -337,10 +337,13 @@ def _interior_point(
             S_new = S + alpha * ds
             # positive and finite (NaN fails both comparisons)
             ok = ((L_new > 0) & (S_new > 0) & (L_new < np.inf) & (S_new < np.inf)).all(axis=1)
-            if not ok.all():
-                failed = active[~ok]
-                status[failed] = LCPStatus.NUMERICAL_FAILURE
-                iterations[failed] = k
+            if ok.all():
+                lam[active] = L_new
+                s[active] = S_new
+                continue
+            failed = active[~ok]
+            status[failed] = LCPStatus.NUMERICAL_FAILURE
+            iterations[failed] = k
             lam[active[ok]] = L_new[ok]
             s[active[ok]] = S_new[ok]
             active = active[ok]
