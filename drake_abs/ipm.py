@@ -24,9 +24,11 @@ Algorithm (per problem, vectorised over the batch):
 
 Safeguards: steps keep the contacts still driving down in the wide neighbourhood
 ``lam_i s_i >= 1e-3 mean`` (backtracking), and a problem whose duality measure stalls drops the
-second-order correction, which otherwise can cycle. Known limit: with cond(F) ~ 1e10 about one
-problem in 10^4 still cycles along F's near-null direction and is reported as not converged
-(measured on random problems, see tests/test_extremes.py).
+second-order correction, which otherwise can cycle. A problem not known to be monotone (the
+friction cone, ``on_bad_matrix="attempt"``) then also backtracks its Newton steps on the residual
+norm (Armijo), since near a fold of a non-monotone central path full steps can cycle.
+Known limit: with cond(F) ~ 1e10 about one problem in 10^4 still cycles along F's near-null
+direction and is reported as not converged (measured on random problems).
 
 Convergence of a problem means ``residual <= tol`` where, in the scaled variables,
 
@@ -161,6 +163,32 @@ def _neighbourhood_step(L, S, dl, ds, alpha, drive, target) -> np.ndarray:
     return out
 
 
+def _merit_step(F, q, L, S, dl, ds, alpha, target, gap_scale, row_scale) -> np.ndarray:
+    """Largest of ``alpha * _BACKTRACK`` that decreases the weighted Newton residual
+    ``|| [(lam o s - target) / gap_scale, (s - F lam - q) / row_scale] ||`` by the Armijo
+    fraction. Used once a problem has dropped Mehrotra's correction: on non-monotone LCPs (the
+    friction cone) full Newton steps near a fold of the central path can cycle, which a merit
+    line search prevents."""
+
+    def merit(a):
+        La, Sa = L + a[:, None] * dl, S + a[:, None] * ds
+        rc = (La * Sa - target) / gap_scale
+        rp = (Sa - _matvec(F, La) - q) / row_scale
+        return np.sqrt((rc * rc).sum(axis=1) + (rp * rp).sum(axis=1))
+
+    m0 = merit(np.zeros_like(alpha))
+    out = alpha * _BACKTRACK[-1]
+    pending = np.ones(len(alpha), dtype=bool)
+    for factor in _BACKTRACK:
+        a = alpha * factor
+        ok = pending & (merit(a) <= (1.0 - 1e-4 * a) * m0)
+        out[ok] = a[ok]
+        pending &= ~ok
+        if not pending.any():
+            break
+    return out
+
+
 def _solve(Minv: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return np.matmul(Minv, rhs[..., None])[..., 0]
 
@@ -254,9 +282,11 @@ def _interior_point(
     s: np.ndarray,
     tol: float,
     max_iterations: int,
+    monotone: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The iterations of the module docstring on the scaled problem, updating ``lam`` and ``s``
-    (B, d) in place. Returns ``(lam, s, status, iterations, residual)``."""
+    (B, d) in place. ``monotone`` (B,) marks problems known to be PSD or P. Returns
+    ``(lam, s, status, iterations, residual)``."""
     B, d = qs.shape
     status = np.full(B, LCPStatus.MAX_ITERATIONS, dtype=np.int8)
     iterations = np.full(B, max_iterations, dtype=np.int64)
@@ -290,8 +320,8 @@ def _interior_point(
                 break
             if done.any():  # drop the converged problems from the working set
                 keep = ~done
-                active, L, S, qa, ma, ga, rp, gap, res_p = (
-                    a[keep] for a in (active, L, S, qa, ma, ga, rp, gap, res_p)
+                active, L, S, qa, ma, ga, rp, gap, res_p, row_scale = (
+                    a[keep] for a in (active, L, S, qa, ma, ga, rp, gap, res_p, row_scale)
                 )
                 if not shared:
                     Fa = Fa[keep]
@@ -332,6 +362,20 @@ def _interior_point(
             alpha = np.minimum(1.0, 0.995 * a_max)
             if d > 1:
                 alpha = _neighbourhood_step(L, S, dl, ds, alpha, drive, ma)
+            newton = ~use_corr & ~monotone[active]
+            if newton.any():  # not known monotone, uncorrected: Armijo backtracking
+                alpha[newton] = _merit_step(
+                    Fa if shared else Fa[newton],
+                    qa[newton],
+                    L[newton],
+                    S[newton],
+                    dl[newton],
+                    ds[newton],
+                    alpha[newton],
+                    target[newton],
+                    ga[newton],
+                    row_scale[newton],
+                )
             alpha = alpha[:, None]
             L_new = L + alpha * dl
             S_new = S + alpha * ds
@@ -425,6 +469,7 @@ def solve_lcp(
             )
     mu_full, mu_form = _normalise_mu(mu, B, d, single)
     F, delta, classes = apply_matrix_policy(F, on_bad_matrix, B)
+    monotone = (classes == MatrixClass.PSD) | (classes == MatrixClass.P_MATRIX) | (delta > 0)
 
     # --- scaling (exact powers of two) -------------------------------------------------------
     D = jacobi_scale(F)  # (d,) or (B, d)
@@ -455,7 +500,7 @@ def solve_lcp(
         s = s0 / (D * c[:, None])
 
     lam, s, status, iterations, residual = _interior_point(
-        Fs, qs, mu_s, gap_scale, lam, s, tol, max_iterations
+        Fs, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monotone
     )
     with np.errstate(all="ignore"):
         lam_out = lam * c[:, None] / D

@@ -1,0 +1,278 @@
+"""Rigid bodies with contact, time-stepping, as a mu-softened LCP (MATH.md section 6; paper 000
+eq. 2.2, paper 001 eqs. 1.3-1.5), with the full step Jacobian.
+
+For one step of length h, with inverse mass matrix W = M(q)^-1, the velocity without contact
+``v_free = v + h W (tau(u) - n(q, v))``, normal Jacobians J_n (nc, nv), tangent Jacobians J_t
+(k rows per frictional contact), signed distances phi and ``qdot = N(q) v``:
+
+    v+ = v_free + W (J_n^T gamma + J_t^T beta)                 (impulses, N s)
+    q+ = q + h N(q) v+
+    normal:    phi + h J_n v+ >= 0            perp  gamma >= 0   (m)
+    friction:  J_t v+ + E omega >= 0          perp  beta  >= 0   (m/s)
+    cone:      alpha gamma - E^T beta >= 0    perp  omega >= 0   (N s)
+
+Substituting v+ gives ``s = F lam + z`` in ``lam = (gamma, beta, omega)`` with
+
+    F = [[h Jn W Jn^T, h Jn W Jt^T, 0], [Jt W Jn^T, Jt W Jt^T, E], [diag(alpha), -E^T, 0]]
+    z = [phi + h Jn v_free, Jt v_free, 0]
+
+Frictionless scenes give a positive semidefinite F (monotone LCP). With friction F is copositive
+but not P (zero diagonal in the omega block, non-symmetric cone rows): the interior point runs
+without the P-matrix check (``on_bad_matrix="attempt"``) and reports per problem whether it
+converged; it never returns an unconverged solve as valid.
+
+Smoothing: the policy sees the normal rows (distances z_n, compliance block F_nn) and gives one
+mu per contact (**larger is smoother**); that contact's friction and cone rows get mu / h, the
+same softening expressed in velocity units (their slacks are m/s, not m). In the ``total``
+gradient mode mu is differentiated through z_n (not through F_nn).
+
+Jacobians (MATH.md section 4 chain rule): with p = (q, v, u) and ``f = G^T lam`` (G = [Jn; Jt]),
+
+    d lam / dp = (d lam / d z) (dz/dp + (dF/dp) lam)
+    (dz/dp + (dF/dp) lam)_top = [dphi; 0] + S (dG v+ + G (dv_free + dW f + W dG^T lam))
+    d v+ / dp = dv_free + dW f + W (dG^T lam + G^T d lam)
+    d q+ / dp = [I 0 0] + h (dN v+ + N d v+)
+
+(S = diag(h on normal rows, 1 on tangent rows)); the derivatives of W, J, phi, N and v_free with
+respect to q, v and u come from the caller (e.g. Drake AutoDiffXd).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_abs.ipm import LCPResult, solve_lcp
+from drake_abs.lcs import GradientMode
+from drake_abs.smoothing import Exact, SmoothingPolicy
+
+
+@dataclass(frozen=True)
+class FrictionCone:
+    """Which contacts have friction and how the cone is linearised.
+
+    Attributes:
+        coefficients: (nc,) friction coefficient per contact; NaN for a frictionless contact.
+        directions: k, the number of tangent directions of each frictional contact's cone.
+    """
+
+    coefficients: np.ndarray
+    directions: int = 4
+
+    def __post_init__(self):
+        coeff = np.asarray(self.coefficients, dtype=float).reshape(-1)
+        frictional = ~np.isnan(coeff)
+        if np.any(coeff[frictional] < 0) or np.any(np.isinf(coeff)):
+            raise ValueError(f"friction coefficients must be >= 0 or NaN; got {coeff}")
+        if int(self.directions) < 2 and frictional.any():
+            raise ValueError(
+                f"directions must be >= 2 for frictional contacts; got {self.directions}"
+            )
+        object.__setattr__(self, "coefficients", coeff)
+        object.__setattr__(self, "directions", int(self.directions))
+
+    @property
+    def frictional(self) -> np.ndarray:
+        """Indices of the frictional contacts (nf,)."""
+        return np.flatnonzero(~np.isnan(self.coefficients))
+
+    def sizes(self) -> tuple[int, int, int]:
+        """``(nc, nt, nf)``: contacts, tangent rows (k per frictional contact), cone rows."""
+        nc = self.coefficients.size
+        nf = self.frictional.size
+        return nc, nf * self.directions, nf
+
+
+@dataclass(frozen=True)
+class StepQuantities:
+    """One step's dynamics for a batch of B states (SI units).
+
+    Values: ``q`` (B, nq), ``v`` (B, nv), ``W`` (B, nv, nv) inverse mass matrix, ``v_free``
+    (B, nv), ``phi`` (B, nc) in m, ``Jn`` (B, nc, nv), ``Jt`` (B, nt, nv) with k consecutive rows
+    per frictional contact, ``N`` (B, nq, nv).
+
+    Derivatives with respect to p = (q, v, u), P = nq + nv + nu columns (all None, or all given):
+    ``dW`` (B, nv, nv, P), ``dv_free`` (B, nv, P), ``dphi`` (B, nc, P), ``dJn`` (B, nc, nv, P),
+    ``dJt`` (B, nt, nv, P), ``dN`` (B, nq, nv, P).
+    """
+
+    q: np.ndarray
+    v: np.ndarray
+    W: np.ndarray
+    v_free: np.ndarray
+    phi: np.ndarray
+    Jn: np.ndarray
+    Jt: np.ndarray
+    N: np.ndarray
+    dW: np.ndarray | None = None
+    dv_free: np.ndarray | None = None
+    dphi: np.ndarray | None = None
+    dJn: np.ndarray | None = None
+    dJt: np.ndarray | None = None
+    dN: np.ndarray | None = None
+
+    @property
+    def has_derivatives(self) -> bool:
+        return self.dW is not None
+
+
+@dataclass(frozen=True)
+class ContactStepResult:
+    """One batched rigid-body step.
+
+    Attributes:
+        q_next, v_next: (B, nq), (B, nv).
+        lam: (B, d) LCP variables (gamma (nc), beta (nt), omega (nf)); impulses in N s.
+        mu: (B, nc) central-path value per contact (normal rows, m N s).
+        converged: (B,) solver flags.
+        dx_dx: (B, nq + nv, nq + nv), dx_du: (B, nq + nv, nu), dlam_dx, dlam_du: Jacobians
+            (None unless the quantities carry derivatives).
+        lcp: the solver's result.
+    """
+
+    q_next: np.ndarray
+    v_next: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    converged: np.ndarray
+    dx_dx: np.ndarray | None
+    dx_du: np.ndarray | None
+    dlam_dx: np.ndarray | None
+    dlam_du: np.ndarray | None
+    lcp: LCPResult
+
+
+def assemble_lcp(
+    quant: StepQuantities, cone: FrictionCone, h: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The LCP ``(F (B, d, d), z (B, d))`` of one step, and the row scale S (nc + nt,)."""
+    nc, nt, nf = cone.sizes()
+    B = quant.v.shape[0]
+    G = np.concatenate([quant.Jn, quant.Jt], axis=1)  # (B, nc + nt, nv)
+    S = np.concatenate([np.full(nc, h), np.ones(nt)])
+    d = nc + nt + nf
+    F = np.zeros((B, d, d))
+    F[:, : nc + nt, : nc + nt] = S[:, None] * (G @ quant.W @ np.swapaxes(G, 1, 2))
+    if nf:
+        k = cone.directions
+        E = np.kron(np.eye(nf), np.ones((k, 1)))  # (nt, nf)
+        F[:, nc : nc + nt, nc + nt :] = E
+        F[:, nc + nt :, nc : nc + nt] = -E.T
+        F[:, nc + nt + np.arange(nf), cone.frictional] = cone.coefficients[cone.frictional]
+    z = np.zeros((B, d))
+    z[:, :nc] = quant.phi
+    z[:, : nc + nt] += S * np.einsum("brn,bn->br", G, quant.v_free)
+    return F, z, S
+
+
+def contact_step(
+    quant: StepQuantities,
+    cone: FrictionCone,
+    h: float,
+    smoothing: SmoothingPolicy | None = None,
+    *,
+    gradient: GradientMode = "frozen",
+    strict: bool = False,
+    **solver_options,
+) -> ContactStepResult:
+    """Advance a batch of rigid-body states one step (see the module docstring).
+
+    Jacobians are computed when ``quant`` carries derivatives. ``solver_options`` go to
+    :func:`drake_abs.solve_lcp` (tol, max_iterations, exact_tol).
+    """
+    if gradient not in ("frozen", "total"):
+        raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"h must be a finite number > 0; got {h!r}")
+    smoothing = Exact() if smoothing is None else smoothing
+    nc, nt, nf = cone.sizes()
+    if quant.phi.shape[1] != nc or quant.Jt.shape[1] != nt:
+        raise ValueError(
+            f"quantities do not match the friction cone: phi has {quant.phi.shape[1]} contacts "
+            f"and Jt {quant.Jt.shape[1]} rows; the cone expects {nc} and {nt}"
+        )
+    F, z, S = assemble_lcp(quant, cone, h)
+    Fnn = F[:, :nc, :nc]
+    mu_n = smoothing.mu(z[:, :nc], Fnn)
+    mu = _expand_mu(mu_n, cone, h)
+    jac = quant.has_derivatives
+    lcp = solve_lcp(
+        F, z, mu, jacobians=jac, strict=strict, on_bad_matrix="attempt", **solver_options
+    )
+    lam = lcp.lam
+    lam_v = lam[:, : nc + nt]
+    G = np.concatenate([quant.Jn, quant.Jt], axis=1)
+    f = np.einsum("brn,br->bn", G, lam_v)  # generalised impulse G^T lam
+    v_next = quant.v_free + np.einsum("bnm,bm->bn", quant.W, f)
+    q_next = quant.q + h * np.einsum("bqn,bn->bq", quant.N, v_next)
+    out = dict(dx_dx=None, dx_du=None, dlam_dx=None, dlam_du=None)
+    if jac:
+        out = _step_jacobians(
+            quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient
+        )
+    return ContactStepResult(
+        q_next=q_next,
+        v_next=v_next,
+        lam=lam,
+        mu=lcp.mu[:, :nc],
+        converged=lcp.converged,
+        lcp=lcp,
+        **out,
+    )
+
+
+def _expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
+    """Per-row mu (B, d) from per-contact mu (B, nc): friction and cone rows get mu / h."""
+    nc, nt, nf = cone.sizes()
+    fr = cone.frictional
+    k = cone.directions
+    parts = [mu_n]
+    if nf:
+        parts += [np.repeat(mu_n[:, fr], k, axis=1) / h, mu_n[:, fr] / h]
+    return np.concatenate(parts, axis=1)
+
+
+def _expand_dmu(dmu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
+    """d mu_rows / d z_n (B, d, nc) from d mu_n / d z_n (B, nc, nc)."""
+    nc, nt, nf = cone.sizes()
+    fr = cone.frictional
+    parts = [dmu_n]
+    if nf:
+        parts += [np.repeat(dmu_n[:, fr], cone.directions, axis=1) / h, dmu_n[:, fr] / h]
+    return np.concatenate(parts, axis=1)
+
+
+def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient):
+    nc, nt, nf = cone.sizes()
+    B, nq = quant.q.shape
+    nv = quant.v.shape[1]
+    P = quant.dW.shape[-1]
+    dG = np.concatenate([quant.dJn, quant.dJt], axis=1)  # (B, nc + nt, nv, P)
+    W = quant.W
+    dGT_lam = np.einsum("brnp,br->bnp", dG, lam_v)  # (B, nv, P)
+    dWf = np.einsum("bnmp,bm->bnp", quant.dW, f)
+    inner = quant.dv_free + dWf + np.einsum("bnm,bmp->bnp", W, dGT_lam)
+    top = np.einsum("brnp,bn->brp", dG, v_next) + np.einsum("brn,bnp->brp", G, inner)
+    top = S[None, :, None] * top
+    top[:, :nc] += quant.dphi
+    dz_eff = np.zeros((B, z.shape[1], P))
+    dz_eff[:, : nc + nt] = top
+    dlam = lcp.dlam_dq @ dz_eff  # (B, d, P)
+    if gradient == "total":
+        # dz_n/dp: the distance and free-velocity part (mu's dependence on F is held)
+        dzn = quant.dphi + h * (
+            np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
+            + np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
+        )
+        dmu_rows = _expand_dmu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
+        dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
+    dv = inner + np.einsum("bnm,bmp->bnp", W, np.einsum("brn,brp->bnp", G, dlam[:, : nc + nt]))
+    dq = np.zeros((B, nq, P))
+    dq[:, :, :nq] = np.eye(nq)
+    dq += h * (np.einsum("bqnp,bn->bqp", quant.dN, v_next) + np.einsum("bqn,bnp->bqp", quant.N, dv))
+    dx = np.concatenate([dq, dv], axis=1)  # (B, nq + nv, P)
+    nx = nq + nv
+    return dict(
+        dx_dx=dx[:, :, :nx], dx_du=dx[:, :, nx:], dlam_dx=dlam[:, :, :nx], dlam_du=dlam[:, :, nx:]
+    )

@@ -1,0 +1,112 @@
+"""The rigid-body contact step (MATH.md section 6) on a synthetic planar box whose dynamics
+quantities are smooth closed forms: the assembled step Jacobian against central finite
+differences of the whole step, with and without friction, frozen and total."""
+
+import numpy as np
+import pytest
+from numdiff import central_difference
+
+from drake_abs import ContactAware, Exact, Fixed, solve_lcp
+from drake_abs.contact_lcp import FrictionCone, StepQuantities, assemble_lcp, contact_step
+
+H = 0.01
+CORNERS = np.array([[-0.2, -0.1], [0.2, -0.1]])  # box-frame corners touching the ground
+
+
+def components(q, v, u, mass=1.3, inertia=0.02, g=9.81):
+    """Planar box (x, z, theta): W, v_free, phi, Jn, Jt (+t, -t per corner), N; smooth in q."""
+    x, z, th = q
+    c, s = np.cos(th), np.sin(th)
+    # a configuration-dependent mass matrix, so that dW/dq is exercised
+    M = np.diag([mass, mass, inertia]) + 0.01 * np.outer([c, s, 0.3], [c, s, 0.3])
+    W = np.linalg.inv(M)
+    tau = u - np.array([0.0, mass * g, 0.0]) - 0.05 * v * np.abs(np.sin(th + 0.3))
+    v_free = v + H * W @ tau
+    phi, Jn, Jt = [], [], []
+    for px, pz in CORNERS:
+        phi.append(z + s * px + c * pz)
+        Jn.append([0.0, 1.0, c * px - s * pz])
+        t = [1.0, 0.0, -s * px - c * pz]
+        Jt += [t, [-a for a in t]]
+    N = np.eye(3) + 0.05 * np.diag([0.0, 0.0, np.sin(th)])  # a q-dependent N, to exercise dN
+    return W, v_free, np.array(phi), np.array(Jn), np.array(Jt), N
+
+
+def quantities(q, v, u, cone, derivatives=True):
+    """StepQuantities of one state; derivatives by central differences of each component."""
+    W, v_free, phi, Jn, Jt, N = components(q, v, u)
+    rows = cone.sizes()[1]  # tangent rows: none without friction
+    kwargs = {}
+    if derivatives:
+        p_nominal = np.concatenate([q, v, u])
+        values = components(q, v, u)
+        d = []
+        for i, value in enumerate(values):
+
+            def part(p, i=i):
+                return components(p[:3], p[3:6], p[6:])[i].ravel()
+
+            d.append(central_difference(part, p_nominal, eps=1e-6).reshape(*value.shape, 9))
+        kwargs = dict(dW=d[0], dv_free=d[1], dphi=d[2], dJn=d[3], dJt=d[4][:rows], dN=d[5])
+        kwargs = {k: a[None] for k, a in kwargs.items()}
+    return StepQuantities(
+        q[None],
+        v[None],
+        W[None],
+        v_free[None],
+        phi[None],
+        Jn[None],
+        Jt[None, :rows],
+        N[None],
+        **kwargs,
+    )
+
+
+CONES = {
+    "frictionless": FrictionCone(np.array([np.nan, np.nan]), 2),
+    "friction": FrictionCone(np.array([0.6, 0.6]), 2),
+}
+STATES = {
+    "resting": (np.array([0.0, 0.1 + 1e-4, 0.0]), np.array([0.3, -0.2, 0.0])),
+    # (at vx = 0.5 the exact frictional solution sticks exactly on the cone boundary: omega and
+    # its slack are both 0, the step is not differentiable there and FD is no reference)
+    "tilted_impact": (np.array([0.1, 0.13, 0.15]), np.array([1.0, -1.5, 0.4])),
+    "sliding": (np.array([0.0, 0.0999, -0.02]), np.array([1.2, 0.0, 0.1])),
+}
+
+
+@pytest.mark.parametrize("cone", CONES.values(), ids=CONES.keys())
+@pytest.mark.parametrize("state", STATES.values(), ids=STATES.keys())
+@pytest.mark.parametrize(
+    "policy, gradient",
+    [
+        (Exact(), "frozen"),
+        (Fixed(1e-4), "frozen"),
+        (ContactAware(mu_max=1e-3, length=0.02, mu_min=1e-8), "total"),
+    ],
+    ids=["exact", "bs", "abs-total"],
+)
+def test_step_jacobians_match_finite_differences(cone, state, policy, gradient):
+    q, v = state
+    u = np.array([0.4, 2.0, 0.01])
+    r = contact_step(quantities(q, v, u, cone), cone, H, policy, gradient=gradient, strict=True)
+    assert r.lam[0, :2].max() > 1e-3  # every state makes contact within the step
+    mu_frozen = r.lcp.mu_target
+
+    def step(p):
+        quant = quantities(p[:3], p[3:6], p[6:], cone, derivatives=False)
+        if gradient == "frozen":  # hold mu at its value at the nominal point
+            F, z, _ = assemble_lcp(quant, cone, H)
+            lam = solve_lcp(F, z, mu_frozen, on_bad_matrix="attempt", strict=True).lam
+            G = np.concatenate([quant.Jn, quant.Jt], axis=1)
+            f = np.einsum("brn,br->bn", G, lam[:, : G.shape[1]])
+            v_next = quant.v_free + np.einsum("bnm,bm->bn", quant.W, f)
+            q_next = quant.q + H * np.einsum("bqn,bn->bq", quant.N, v_next)
+        else:
+            out = contact_step(quant, cone, H, policy, strict=True)
+            q_next, v_next = out.q_next, out.v_next
+        return np.concatenate([q_next[0], v_next[0]])
+
+    fd = central_difference(step, np.concatenate([q, v, u]), eps=1e-7)
+    analytic = np.concatenate([r.dx_dx[0], r.dx_du[0]], axis=1)
+    np.testing.assert_allclose(analytic, fd, atol=2e-5 * (1 + np.abs(fd).max()))
