@@ -1,0 +1,167 @@
+"""One step's dynamics quantities of a Drake MultibodyPlant with point contacts against a plane,
+with their derivatives, for the complementarity step of :mod:`drake_abs.contact_lcp`.
+
+Values and derivatives come from one AutoDiffXd evaluation of the plant per state, seeded with
+the identity on p = (q, v, u): M(q), the bias and gravity terms, the actuation, the contact
+points' signed distances and translational Jacobians, and qdot = N(q) v. Geometry is computed
+here (a point, with an optional radius, against a half-space), not by SceneGraph, so only the
+contacts a scene declares exist (and AutoDiffXd distance queries are not needed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import JacobianWrtVariable
+
+from drake_abs.contact_lcp import FrictionCone, StepQuantities
+
+
+@dataclass(frozen=True)
+class PointContact:
+    """A contact candidate: point ``p_BC`` (m, body frame) of ``body``, with ``radius`` (m; a
+    sphere around the point, 0 for a point), against the ground plane; ``friction`` is the
+    Coulomb coefficient (None: frictionless)."""
+
+    body: str
+    p_BC: tuple[float, float, float]
+    radius: float = 0.0
+    friction: float | None = None
+    model_instance: str | None = None
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """The half-space ``n . p >= height`` (n normalised)."""
+
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    height: float = 0.0
+
+
+def tangent_directions(normal: np.ndarray, k: int) -> np.ndarray:
+    """k unit directions (k, 3) spanning the plane orthogonal to ``normal``, evenly spread."""
+    n = normal / np.linalg.norm(normal)
+    seed = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = seed - n * (seed @ n)
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    angles = 2 * np.pi * np.arange(k) / k
+    return np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
+
+
+def _split(arr: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
+    """Value (shape of arr) and gradient (shape + (P,)) of an AutoDiffXd array."""
+    flat = np.asarray(arr, dtype=object).ravel()
+    value = ExtractValue(flat).reshape(arr.shape)
+    grad = ExtractGradient(flat)
+    if grad.shape[1] != P:  # entries that carry no derivatives (constants)
+        grad = np.zeros((flat.size, P))
+    return value, grad.reshape(arr.shape + (P,))
+
+
+class MultibodyContactModel:
+    """Evaluates :class:`~drake_abs.contact_lcp.StepQuantities` for a finalized continuous
+    MultibodyPlant (double) and a list of point contacts against one ground plane.
+
+    Args:
+        plant: a finalized MultibodyPlant (time_step 0: the step is ours), double.
+        contacts: the contact candidates.
+        ground: the plane contacts act against.
+        time_step: h in s.
+        directions: tangent directions per frictional contact (linearised cone).
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        contacts: list[PointContact],
+        ground: GroundPlane,
+        time_step: float,
+        directions: int = 4,
+    ):
+        if not plant.is_finalized():
+            raise ValueError("plant must be finalized")
+        if not contacts:
+            raise ValueError("contacts must list at least one PointContact")
+        self.plant = plant
+        self.plant_ad = plant.ToAutoDiffXd()
+        self.context_ad = self.plant_ad.CreateDefaultContext()
+        self.contacts = list(contacts)
+        self.ground = ground
+        self.h = float(time_step)
+        self.normal = np.asarray(ground.normal, float) / np.linalg.norm(ground.normal)
+        friction = [np.nan if c.friction is None else c.friction for c in contacts]
+        self.cone = FrictionCone(np.array(friction), directions)
+        self.tangents = tangent_directions(self.normal, self.cone.directions)
+        self.B_act = plant.MakeActuationMatrix()
+        self.nq, self.nv, self.nu = (
+            plant.num_positions(),
+            plant.num_velocities(),
+            plant.num_actuators(),
+        )
+        self._bodies = []
+        for c in contacts:
+            instance = (
+                self.plant_ad.GetModelInstanceByName(c.model_instance) if c.model_instance else None
+            )
+            body = (
+                self.plant_ad.GetBodyByName(c.body, instance)
+                if instance is not None
+                else self.plant_ad.GetBodyByName(c.body)
+            )
+            self._bodies.append(body)
+        self._unit_v = [
+            np.array([AutoDiffXd(float(i == j)) for i in range(self.nv)]) for j in range(self.nv)
+        ]
+
+    def quantities(self, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> StepQuantities:
+        """Quantities with derivatives for a batch: q (B, nq), v (B, nv), u (B, nu)."""
+        per_state = [self._one(qb, vb, ub) for qb, vb, ub in zip(q, v, u, strict=True)]
+        fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
+        return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
+
+    def _one(self, q, v, u) -> dict:
+        plant, ctx = self.plant_ad, self.context_ad
+        nq, nv, nu = self.nq, self.nv, self.nu
+        P = nq + nv + nu
+        q_ad = InitializeAutoDiff(np.reshape(q, (-1, 1)), P, 0).ravel()
+        v_ad = InitializeAutoDiff(np.reshape(v, (-1, 1)), P, nq).ravel()
+        u_ad = InitializeAutoDiff(np.reshape(u, (-1, 1)), P, nq + nv).ravel()
+        plant.SetPositions(ctx, q_ad)
+        plant.SetVelocities(ctx, v_ad)
+        M, dM = _split(plant.CalcMassMatrix(ctx), P)
+        tau = self.B_act @ u_ad + plant.CalcGravityGeneralizedForces(ctx) - plant.CalcBiasTerm(ctx)
+        tau, dtau = _split(tau, P)
+        W = np.linalg.inv(M)
+        dW = -np.einsum("ij,jkp,kl->ilp", W, dM, W)
+        dv_free = np.zeros((nv, P))
+        dv_free[:, nq : nq + nv] = np.eye(nv)
+        dv_free += self.h * (np.einsum("ijp,j->ip", dW, tau) + W @ dtau)
+        v_free = np.asarray(v, float) + self.h * W @ tau
+        N_ad = np.stack([plant.MapVelocityToQDot(ctx, e) for e in self._unit_v], axis=1)
+        N, dN = _split(N_ad, P)
+        phi, Jn, Jt = [], [], []
+        world = plant.world_frame()
+        for contact, body in zip(self.contacts, self._bodies, strict=True):
+            X_WB = plant.EvalBodyPoseInWorld(ctx, body)
+            p_WC = X_WB.multiply(np.asarray(contact.p_BC, float))
+            phi.append(self.normal @ p_WC - contact.radius - self.ground.height)
+            p_WQ = p_WC - contact.radius * self.normal  # the witness point on the body
+            p_BQ = X_WB.inverse().multiply(p_WQ)
+            J = plant.CalcJacobianTranslationalVelocity(
+                ctx, JacobianWrtVariable.kV, body.body_frame(), p_BQ, world, world
+            )
+            Jn.append(self.normal @ J)
+            if contact.friction is not None:
+                Jt.extend(self.tangents @ J)
+        phi, dphi = _split(np.array(phi, dtype=object), P)
+        Jn, dJn = _split(np.array(Jn, dtype=object).reshape(len(self.contacts), nv), P)
+        Jt_arr = np.array(Jt, dtype=object).reshape(len(Jt), nv)
+        Jt, dJt = _split(Jt_arr, P) if len(Jt) else (np.zeros((0, nv)), np.zeros((0, nv, P)))
+        return dict(
+            W=W, v_free=v_free, phi=phi, Jn=Jn, Jt=Jt, N=N,
+            dW=dW, dv_free=dv_free, dphi=dphi, dJn=dJn, dJt=dJt, dN=dN,
+        )  # fmt: skip
