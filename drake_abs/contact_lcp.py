@@ -47,13 +47,14 @@ from drake_abs.ipm import LCPResult, solve_lcp
 from drake_abs.lcs import GradientMode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 
-#: Solver defaults for contact steps. A sticking contact makes the linearised-cone LCP
-#: degenerate (xi_j = 0 in every direction, beta_j = 0 in those carrying no force), where
-#: interior points converge linearly, so the iteration budget is 200. The exact floor stays at
-#: the solver's default: a coarser one (tried: exact_tol = 1e-9) leaves the redundant friction
-#: directions all active, a nearly singular Newton matrix, and step Jacobians off by ~1 % on a
-#: rolling ball against finite differences.
-CONTACT_SOLVER_DEFAULTS = {"max_iterations": 200}
+#: Solver defaults for contact steps. Sticking makes the linearised-cone LCP degenerate
+#: (beta_j = xi_j = 0) and its friction split non-unique (opposing directions can carry equal,
+#: cancelling impulses), where interior points converge linearly. The exact floor trades
+#: convergence at rest against Jacobian accuracy at a sticking contact; measured (resting box;
+#: rolling ball's step Jacobian against FD, scale 100): exact_tol 1e-9: 28 iterations, error
+#: 0.6; 1e-12: 68 iterations, error 2e-6; 1e-15 (the solver default): no convergence at rest
+#: within 200 iterations. Hence exact_tol = 1e-12 and a budget of 200 iterations.
+CONTACT_SOLVER_DEFAULTS = {"exact_tol": 1e-12, "max_iterations": 200}
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,7 @@ class ContactStepResult:
         converged: (B,) solver flags.
         dx_dx: (B, nq + nv, nq + nv), dx_du: (B, nq + nv, nu), dlam_dx, dlam_du: Jacobians
             (None unless the quantities carry derivatives).
-        lcp: the solver's result.
+        lcp: the solver's result (None when no contact was active: no LCP was solved).
     """
 
     q_next: np.ndarray
@@ -148,7 +149,7 @@ class ContactStepResult:
     dx_du: np.ndarray | None
     dlam_dx: np.ndarray | None
     dlam_du: np.ndarray | None
-    lcp: LCPResult
+    lcp: LCPResult | None
 
 
 def assemble_lcp(
@@ -201,6 +202,8 @@ def contact_step(
             f"quantities do not match the friction cone: phi has {quant.phi.shape[1]} contacts "
             f"and Jt {quant.Jt.shape[1]} rows; the cone expects {nc} and {nt}"
         )
+    if nc == 0:
+        return _free_step(quant, h)
     F, z, S = assemble_lcp(quant, cone, h)
     Fnn = F[:, :nc, :nc]
     mu_n = smoothing.mu(z[:, :nc], Fnn)
@@ -228,6 +231,32 @@ def contact_step(
         lcp=lcp,
         **out,
     )
+
+
+def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
+    """No active contact: v+ = v_free, q+ = q + h N v+ (no LCP is solved)."""
+    B, nq = quant.q.shape
+    v_next = quant.v_free.copy()
+    q_next = quant.q + h * np.einsum("bqn,bn->bq", quant.N, v_next)
+    empty = np.zeros((B, 0))
+    jac = dict(dx_dx=None, dx_du=None, dlam_dx=None, dlam_du=None)
+    if quant.has_derivatives:
+        P = quant.dv_free.shape[-1]
+        nx = nq + quant.v.shape[1]
+        dq = np.zeros((B, nq, P))
+        dq[:, :, :nq] = np.eye(nq)
+        dq += h * (
+            np.einsum("bqnp,bn->bqp", quant.dN, v_next)
+            + np.einsum("bqn,bnp->bqp", quant.N, quant.dv_free)
+        )
+        dx = np.concatenate([dq, quant.dv_free], axis=1)
+        jac = dict(
+            dx_dx=dx[:, :, :nx],
+            dx_du=dx[:, :, nx:],
+            dlam_dx=np.zeros((B, 0, nx)),
+            dlam_du=np.zeros((B, 0, P - nx)),
+        )
+    return ContactStepResult(q_next, v_next, empty, empty, np.ones(B, dtype=bool), lcp=None, **jac)
 
 
 def _expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:

@@ -113,17 +113,45 @@ class MultibodyContactModel:
                 else self.plant_ad.GetBodyByName(c.body)
             )
             self._bodies.append(body)
+        self._context = plant.CreateDefaultContext()
+        self._bodies_d = [plant.get_body(b.index()) for b in self._bodies]
         self._unit_v = [
             np.array([AutoDiffXd(float(i == j)) for i in range(self.nv)]) for j in range(self.nv)
         ]
 
-    def quantities(self, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> StepQuantities:
-        """Quantities with derivatives for a batch: q (B, nq), v (B, nv), u (B, nu)."""
-        per_state = [self._one(qb, vb, ub) for qb, vb, ub in zip(q, v, u, strict=True)]
-        fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
+    def cone_for(self, active: np.ndarray) -> FrictionCone:
+        """The friction cone of a subset of the contacts (indices)."""
+        return FrictionCone(self.cone.coefficients[active], self.cone.directions)
+
+    def distances(self, q: np.ndarray) -> np.ndarray:
+        """Signed distances (B, nc) in m of every contact candidate, in double."""
+        plant, ctx = self.plant, self._context
+        out = np.empty((len(q), len(self.contacts)))
+        for b, qb in enumerate(q):
+            plant.SetPositions(ctx, qb)
+            for i, (contact, body) in enumerate(zip(self.contacts, self._bodies_d, strict=True)):
+                p_WC = plant.EvalBodyPoseInWorld(ctx, body).multiply(np.asarray(contact.p_BC))
+                out[b, i] = self.normal @ p_WC - contact.radius - self.ground.height
+        return out
+
+    def quantities(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        u: np.ndarray,
+        active: np.ndarray | None = None,
+        *,
+        derivatives: bool = True,
+    ) -> StepQuantities:
+        """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
+        (indices; all by default), with derivatives unless ``derivatives=False``."""
+        active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
+        per_state = [self._one(qb, vb, ub, active) for qb, vb, ub in zip(q, v, u, strict=True)]
+        keys = per_state[0] if derivatives else [k for k in per_state[0] if not k.startswith("d")]
+        fields = {k: np.stack([s[k] for s in per_state]) for k in keys}
         return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
 
-    def _one(self, q, v, u) -> dict:
+    def _one(self, q, v, u, active) -> dict:
         plant, ctx = self.plant_ad, self.context_ad
         nq, nv, nu = self.nq, self.nv, self.nu
         P = nq + nv + nu
@@ -145,7 +173,8 @@ class MultibodyContactModel:
         N, dN = _split(N_ad, P)
         phi, Jn, Jt = [], [], []
         world = plant.world_frame()
-        for contact, body in zip(self.contacts, self._bodies, strict=True):
+        for i in active:
+            contact, body = self.contacts[i], self._bodies[i]
             X_WB = plant.EvalBodyPoseInWorld(ctx, body)
             p_WC = X_WB.multiply(np.asarray(contact.p_BC, float))
             phi.append(self.normal @ p_WC - contact.radius - self.ground.height)
@@ -157,8 +186,8 @@ class MultibodyContactModel:
             Jn.append(self.normal @ J)
             if contact.friction is not None:
                 Jt.extend(self.tangents @ J)
-        phi, dphi = _split(np.array(phi, dtype=object), P)
-        Jn, dJn = _split(np.array(Jn, dtype=object).reshape(len(self.contacts), nv), P)
+        phi, dphi = _split(np.array(phi, dtype=object).reshape(len(active)), P)
+        Jn, dJn = _split(np.array(Jn, dtype=object).reshape(len(active), nv), P)
         Jt_arr = np.array(Jt, dtype=object).reshape(len(Jt), nv)
         Jt, dJt = _split(Jt_arr, P) if len(Jt) else (np.zeros((0, nv)), np.zeros((0, nv, P)))
         return dict(

@@ -37,7 +37,7 @@ def box_corners(friction):
 SCENES = {
     # a spinning ball landing with friction (floating base, rpy)
     "ball": (
-        "models/ball.sdf",
+        "drake_abs/models/ball.sdf",
         [PointContact("ball", (0.0, 0.0, 0.0), 0.05, 0.5)],
         4,
         np.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.051]),
@@ -45,14 +45,14 @@ SCENES = {
     ),
     # the planar box, pushed while landing tilted; friction in its plane only (k = 2)
     "box": (
-        "models/box_planar.sdf",
+        "drake_abs/models/box_planar.sdf",
         box_corners(0.6),
         2,
         np.array([0.0, 0.1005, 0.05]),
         np.array([1.0, -0.5, 0.3]),
     ),
     "box_frictionless": (
-        "models/box_planar.sdf",
+        "drake_abs/models/box_planar.sdf",
         box_corners(None),
         2,
         np.array([0.0, 0.1005, 0.05]),

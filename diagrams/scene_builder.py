@@ -1,0 +1,108 @@
+"""Build a scene's MultibodyPlant and contact model from a :class:`drake_abs.scene.Scene`."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import BaseBodyJointType, MultibodyPlant
+
+from drake_abs.scene import ModelSpec, Scene
+from drake_abs.systems.multibody_quantities import GroundPlane, MultibodyContactModel, PointContact
+
+PACKAGE_DIR = Path(__import__("drake_abs").__file__).resolve().parent
+
+
+@functools.cache
+def example_robot_data_dir() -> Path:
+    """The installed example-robot-data share folder (…/share/example-robot-data)."""
+    import sys
+
+    for base in map(Path, sys.path):
+        for candidate in (
+            base / "cmeel.prefix/share/example-robot-data",
+            base / "share/example-robot-data",
+        ):
+            if (candidate / "robots").is_dir():
+                return candidate
+    prefix = Path(sys.prefix) / "share/example-robot-data"
+    if (prefix / "robots").is_dir():
+        return prefix
+    raise FileNotFoundError(
+        "example-robot-data is not installed (pip install example-robot-data): its robots/ "
+        "folder was not found under sys.path or sys.prefix"
+    )
+
+
+def resolve_model_file(spec: ModelSpec) -> Path:
+    """The file a ModelSpec names: ``drake_abs:``, ``example-robot-data:`` or a path."""
+    if spec.file.startswith("drake_abs:"):
+        path = PACKAGE_DIR / spec.file.split(":", 1)[1]
+    elif spec.file.startswith("example-robot-data:"):
+        path = example_robot_data_dir() / "robots" / spec.file.split(":", 1)[1]
+    else:
+        path = Path(spec.file)
+    if not path.is_file():
+        raise FileNotFoundError(f"model file {spec.file!r} not found (looked at {path})")
+    return path
+
+
+@dataclass(frozen=True)
+class SceneModel:
+    """A scene's dynamics: a continuous MultibodyPlant (no SceneGraph: contacts are the scene's
+    declared points) and its contact model, plus the initial state."""
+
+    scene: Scene
+    plant: MultibodyPlant
+    contact_model: MultibodyContactModel
+    q0: np.ndarray
+    v0: np.ndarray
+
+
+def add_scene_models(plant: MultibodyPlant, scene: Scene, parser: Parser | None = None) -> None:
+    """Parse the scene's models into ``plant`` (not finalized), with welds and actuators."""
+    parser = parser or Parser(plant)
+    if any(m.file.startswith("example-robot-data:") for m in scene.models):
+        parser.package_map().Add("example-robot-data", str(example_robot_data_dir()))
+        robots = example_robot_data_dir() / "robots"
+        for package in robots.iterdir():  # URDFs refer to package://<robot>_description/...
+            if package.is_dir() and not parser.package_map().Contains(package.name):
+                parser.package_map().Add(package.name, str(package))
+    for spec in scene.models:
+        instances = parser.AddModels(str(resolve_model_file(spec)))
+        instance = instances[0]
+        if spec.name:
+            plant.RenameModelInstance(instance, spec.name)
+        if spec.weld:
+            plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.weld, instance))
+        for joint in spec.actuate:
+            plant.AddJointActuator(f"{joint}_actuator", plant.GetJointByName(joint, instance))
+
+
+def build_scene_model(scene: Scene) -> SceneModel:
+    """The dynamics plant and contact model of ``scene``."""
+    plant = MultibodyPlant(0.0)
+    plant.SetBaseBodyJointType(BaseBodyJointType.kRpyFloatingJoint)
+    add_scene_models(plant, scene)
+    plant.Finalize()
+    contacts = [
+        PointContact(c.body, tuple(p), c.radius, c.friction, c.model)
+        for c in scene.contacts
+        for p in c.points
+    ]
+    ground = GroundPlane(scene.ground_normal, scene.ground_height)
+    model = MultibodyContactModel(
+        plant, contacts, ground, scene.time_step, scene.friction_directions
+    )
+    context = plant.CreateDefaultContext()
+    q0 = np.asarray(scene.initial_state.get("q", plant.GetPositions(context)), float)
+    v0 = np.asarray(scene.initial_state.get("v", plant.GetVelocities(context)), float)
+    if q0.shape != (plant.num_positions(),) or v0.shape != (plant.num_velocities(),):
+        raise ValueError(
+            f"scene {scene.name!r}: initial_state q and v must have {plant.num_positions()} and "
+            f"{plant.num_velocities()} entries; got {q0.shape} and {v0.shape}"
+        )
+    return SceneModel(scene, plant, model, q0, v0)

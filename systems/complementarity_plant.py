@@ -1,0 +1,211 @@
+"""The complementarity plant: a MultibodyPlant's dynamics with the scene's point contacts,
+stepped by the mu-softened LCP of :mod:`drake_abs.contact_lcp`.
+
+:class:`ComplementarityStepper` is the one batched step (used by the Drake system below and by
+batched rollouts). It leaves out contacts farther than the activation distance, so a step's cost
+follows the contacts in play, not the size of the model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_abs.contact_lcp import contact_step
+from drake_abs.lcs import GradientMode
+from drake_abs.smoothing import Exact, SmoothingPolicy
+from drake_abs.systems import autodiff
+from drake_abs.systems.multibody_quantities import MultibodyContactModel
+
+
+@dataclass(frozen=True)
+class RigidStepResult:
+    """One batched step of a complementarity plant (B states, nc contact candidates).
+
+    Attributes:
+        x_next: (B, nq + nv).
+        normal_impulse: (B, nc) normal impulse of every candidate (N s; 0 when left out).
+        friction_impulse: (B, nc, 3) tangential impulse in the world frame (N s).
+        mu: (B, nc) central-path value reached per contact (0 when left out).
+        active: (B, nc) which candidates were in the step's LCP.
+        converged: (B,) solver flags.
+        iterations: (B,) interior-point iterations (0 without an LCP).
+        dx_dx, dx_du: (B, nx, nx), (B, nx, nu); dn_dx, dn_du: (B, nc, nx), (B, nc, nu) for the
+            normal impulses (None unless Jacobians were asked for).
+    """
+
+    x_next: np.ndarray
+    normal_impulse: np.ndarray
+    friction_impulse: np.ndarray
+    mu: np.ndarray
+    active: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    dx_dx: np.ndarray | None = None
+    dx_du: np.ndarray | None = None
+    dn_dx: np.ndarray | None = None
+    dn_du: np.ndarray | None = None
+
+
+class ComplementarityStepper:
+    """Batched step ``x+ = f(x, u)`` with Jacobians, for one contact model.
+
+    Args:
+        model: the plant's contact model (quantities and derivatives).
+        smoothing: per-contact mu policy (default Exact); larger mu is smoother.
+        gradient: ``"frozen"`` or ``"total"`` (see :func:`drake_abs.contact_lcp.contact_step`).
+        activation_distance: candidates farther than this (m) are left out of the LCP.
+        solver_options: passed to the interior-point solver.
+    """
+
+    def __init__(
+        self,
+        model: MultibodyContactModel,
+        smoothing: SmoothingPolicy | None = None,
+        gradient: GradientMode = "frozen",
+        activation_distance: float = float("inf"),
+        **solver_options,
+    ):
+        if gradient not in ("frozen", "total"):
+            raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+        self.model = model
+        self.smoothing = Exact() if smoothing is None else smoothing
+        self.gradient = gradient
+        self.activation_distance = float(activation_distance)
+        self.solver_options = solver_options
+
+    @property
+    def sizes(self) -> tuple[int, int, int, int]:
+        """``(nq, nv, nu, nc)``."""
+        m = self.model
+        return m.nq, m.nv, m.nu, len(m.contacts)
+
+    def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True) -> RigidStepResult:
+        """Step a batch: x (B, nq + nv), u (B, nu)."""
+        nq, nv, nu, nc = self.sizes
+        x = np.atleast_2d(np.asarray(x, float))
+        u = np.broadcast_to(np.asarray(u, float), (x.shape[0], nu))
+        if x.shape[1] != nq + nv:
+            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
+            raise ValueError("x and u must be finite")
+        B = x.shape[0]
+        q, v = x[:, :nq], x[:, nq:]
+        active = self.model.distances(q) <= self.activation_distance
+        out = {
+            "x_next": np.empty((B, nq + nv)),
+            "normal_impulse": np.zeros((B, nc)),
+            "friction_impulse": np.zeros((B, nc, 3)),
+            "mu": np.zeros((B, nc)),
+            "converged": np.ones(B, dtype=bool),
+            "iterations": np.zeros(B, dtype=np.int64),
+        }
+        if jacobians:
+            out.update(
+                dx_dx=np.empty((B, nq + nv, nq + nv)),
+                dx_du=np.empty((B, nq + nv, nu)),
+                dn_dx=np.zeros((B, nc, nq + nv)),
+                dn_du=np.zeros((B, nc, nu)),
+            )
+        masks, group = np.unique(active, axis=0, return_inverse=True)
+        for g, mask in enumerate(masks):
+            rows = np.flatnonzero(group.ravel() == g)
+            idx = np.flatnonzero(mask)
+            quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
+            cone = self.model.cone_for(idx)
+            r = contact_step(
+                quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
+                **self.solver_options,
+            )  # fmt: skip
+            self._scatter(out, rows, idx, cone, r, jacobians)
+        return RigidStepResult(active=active, **out)
+
+    def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
+        nc_g, nt, _ = cone.sizes()
+        out["x_next"][rows] = np.concatenate([r.q_next, r.v_next], axis=1)
+        out["converged"][rows] = r.converged
+        if r.lcp is None:
+            return
+        out["iterations"][rows] = r.lcp.iterations
+        grid = np.ix_(rows, idx)
+        out["normal_impulse"][grid] = r.lam[:, :nc_g]
+        out["mu"][grid] = r.mu
+        k = cone.directions
+        beta = r.lam[:, nc_g : nc_g + nt].reshape(len(rows), -1, k)
+        fr = idx[cone.frictional]
+        out["friction_impulse"][np.ix_(rows, fr)] = beta @ self.model.tangents
+        if jacobians:
+            out["dx_dx"][rows] = r.dx_dx
+            out["dx_du"][rows] = r.dx_du
+            out["dn_dx"][grid] = r.dlam_dx[:, :nc_g]
+            out["dn_du"][grid] = r.dlam_du[:, :nc_g]
+
+
+@TemplateSystem.define("ComplementarityPlant_", T_list=[float, AutoDiffXd])
+def ComplementarityPlant_(T):
+    class Impl(LeafSystem_[T]):
+        """A MultibodyPlant with complementarity contact, stepped every ``time_step`` seconds.
+
+        .. pydrake_system::
+
+            name: ComplementarityPlant
+            input_ports:
+            - actuation
+            output_ports:
+            - state
+            - normal_impulse
+            - mu
+
+        Discrete state: x = (q, v) of the plant, and the normal impulses and central-path
+        values of the most recent step (zero before the first). Under AutoDiffXd the step is
+        solved in double and the implicit Jacobians are chained onto incoming derivatives of
+        the state and the normal impulses (the mu port carries values only).
+
+        Args:
+            stepper: the batched step (model, smoothing, gradient mode, activation distance).
+        """
+
+        def _construct(self, stepper: ComplementarityStepper, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.stepper = stepper
+            nq, nv, nu, nc = stepper.sizes
+            self._x = self.DeclareDiscreteState(nq + nv)
+            self._n = self.DeclareDiscreteState(nc)
+            self._mu = self.DeclareDiscreteState(nc)
+            self.actuation_port = self.DeclareVectorInputPort("actuation", nu)
+            self.state_port = self.DeclareStateOutputPort("state", self._x)
+            self.impulse_port = self.DeclareStateOutputPort("normal_impulse", self._n)
+            self.mu_port = self.DeclareStateOutputPort("mu", self._mu)
+            self.DeclarePeriodicDiscreteUpdateEvent(stepper.model.h, 0.0, self._Update)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.stepper, converter=converter)
+
+        def SetInitialState(self, context, x0) -> None:
+            """Set x = (q, v) in this system's ``context``."""
+            context.SetDiscreteState(self._x, np.asarray(x0))
+
+        def _Update(self, context, discrete_state):
+            x = context.get_discrete_state(self._x).value()
+            u = self.actuation_port.Eval(context) if self.stepper.sizes[2] else np.zeros(0)
+            if autodiff.is_autodiff(x) or autodiff.is_autodiff(u):
+                (xv, uv), (gx, gu) = autodiff.split([x, u])
+                r = self.stepper.step(xv[None], uv[None], jacobians=True)
+                x_next = autodiff.join(r.x_next[0], r.dx_dx[0] @ gx + r.dx_du[0] @ gu)
+                impulse = autodiff.join(r.normal_impulse[0], r.dn_dx[0] @ gx + r.dn_du[0] @ gu)
+                mu = autodiff.join(r.mu[0], np.zeros((r.mu.shape[1], gx.shape[1])))
+            else:
+                r = self.stepper.step(np.asarray(x)[None], np.asarray(u)[None], jacobians=False)
+                x_next, impulse, mu = r.x_next[0], r.normal_impulse[0], r.mu[0]
+            discrete_state.set_value(self._x, x_next)
+            discrete_state.set_value(self._n, impulse)
+            discrete_state.set_value(self._mu, mu)
+
+    return Impl
+
+
+ComplementarityPlant = ComplementarityPlant_[None]
