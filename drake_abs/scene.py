@@ -78,7 +78,8 @@ class Scene:
         friction_directions: k, tangent directions per frictional contact (2 for planar scenes).
         ground_normal, ground_height: the ground half-space ``n . p >= height``.
         activation_distance: contacts whose distance exceeds this (m) are left out of a step's
-            LCP (their impulse would be at most about mu / distance).
+            LCP. Under exact contact this changes nothing; under smoothing it drops their force
+            at a distance (about mu / distance each) and, for ContactAware, their say in mu.
         smoothing: ``{"kind": "exact" | "fixed" | "contact_aware" | "gaussian_matched", ...}``
             with the policy's parameters; larger mu is smoother.
         initial_state: ``{"q": [...], "v": [...]}`` (defaults: the plant's default state).

@@ -1,0 +1,137 @@
+"""Scenes: YAML loading and validation, the complementarity plant built from them (only the
+declared contacts, pruning far ones), and its AutoDiffXd gradient."""
+
+import numpy as np
+import pytest
+from numdiff import central_difference
+from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
+from pydrake.systems.analysis import Simulator, Simulator_
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_abs import ContactAware, Exact, Fixed
+from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
+from drake_abs.scene import Scene
+from drake_abs.systems import ComplementarityPlant, ComplementarityStepper, autodiff
+
+BOX = PACKAGE_DIR / "scenes" / "box_push.yaml"
+
+
+def test_yaml_round_trip_and_validation():
+    scene = Scene.from_yaml(BOX)
+    assert scene.num_contacts == 4 and scene.friction_directions == 2
+    assert Scene.from_yaml(scene.to_yaml()) == scene
+    with pytest.raises(ValueError, match="smoothing kind must be one of"):
+        Scene.from_dict({**scene.to_dict(), "smoothing": {"kind": "magic"}})
+    with pytest.raises(ValueError, match="bad smoothing parameters"):
+        Scene.from_dict({**scene.to_dict(), "smoothing": {"kind": "fixed", "mu": 1.0}})
+    with pytest.raises(ValueError, match="time_step must be > 0"):
+        Scene.from_dict({**scene.to_dict(), "time_step": 0.0})
+    with pytest.raises(ValueError, match="unknown scene keys"):
+        Scene.from_dict({**scene.to_dict(), "gravity": 3.0})
+    with pytest.raises(FileNotFoundError, match="model file 'drake_abs:models/none.sdf'"):
+        build_scene_model(
+            Scene.from_dict({**scene.to_dict(), "models": [{"file": "drake_abs:models/none.sdf"}]})
+        )
+
+
+def test_plant_has_only_the_declared_contacts():
+    model = build_scene_model(Scene.from_yaml(BOX)).contact_model
+    assert len(model.contacts) == 4
+    assert model.cone.sizes() == (4, 8, 4)
+
+
+def test_sliding_box_matches_discrete_coulomb_and_stops():
+    """Pushed off at 1 m/s with friction 0.5: v_k = 1 - 0.5 g h k until it stops, so the box
+    travels h sum_k v_k (0.0970 m; the continuous answer v0^2 / (2 mu g) is 0.1019 m)."""
+    sm = build_scene_model(Scene.from_yaml(BOX))
+    stepper = ComplementarityStepper(sm.contact_model, Exact(), activation_distance=0.05)
+    x = np.concatenate([sm.q0, sm.v0])
+    for _ in range(60):
+        r = stepper.step(x[None], np.zeros((1, 1)), jacobians=False)
+        assert r.converged.all()
+        x = r.x_next[0]
+    dv = 0.5 * 9.81 * 0.01
+    k = np.arange(1, int(1.0 / dv) + 1)
+    expected = 0.01 * np.sum(1.0 - dv * k)
+    assert x[0] == pytest.approx(expected, abs=1e-9)
+    assert abs(x[3]) < 1e-9 and abs(x[1] - 0.1) < 1e-9  # at rest on the ground
+
+
+def test_pruning_far_contacts_is_exact_for_hard_contact():
+    """The two upper corners are 0.2 m above the ground: under exact contact, leaving them out
+    of the LCP changes nothing beyond the solver tolerance."""
+    sm = build_scene_model(Scene.from_yaml(BOX))
+    full = ComplementarityStepper(sm.contact_model, Exact())
+    pruned = ComplementarityStepper(sm.contact_model, Exact(), activation_distance=0.05)
+    x = np.concatenate([sm.q0, sm.v0])[None]
+    u = np.array([[3.0]])
+    for _ in range(30):
+        a, b = full.step(x, u), pruned.step(x, u)
+        assert a.active.sum() == 4 and b.active.sum() == 2
+        np.testing.assert_allclose(b.x_next, a.x_next, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(b.dx_dx, a.dx_dx, rtol=0, atol=1e-7)
+        x = a.x_next
+
+
+def test_pruning_under_smoothing_changes_results_by_the_dropped_impulses():
+    """With mu > 0 a far contact still pushes (force at a distance, about mu / distance): pruning
+    drops exactly that, so the change is bounded by the far contacts' impulses."""
+    sm = build_scene_model(Scene.from_yaml(BOX))
+    mu = 1e-5
+    full = ComplementarityStepper(sm.contact_model, Fixed(mu))
+    pruned = ComplementarityStepper(sm.contact_model, Fixed(mu), activation_distance=0.05)
+    x = np.concatenate([sm.q0, sm.v0])[None]
+    a, b = full.step(x, np.zeros((1, 1))), pruned.step(x, np.zeros((1, 1)))
+    far = ~b.active[0]
+    dropped = a.normal_impulse[0, far]
+    assert np.all(dropped > 0) and np.all(dropped < 2 * mu / 0.19)  # ~ mu / phi, phi ~ 0.2 m
+    quant = sm.contact_model.quantities(x[:, :3], x[:, 3:], np.zeros((1, 1)))
+    mobility = np.abs(quant.W[0] @ quant.Jn[0].T).max()  # velocity change per unit impulse
+    dv = np.abs(a.x_next - b.x_next).max()
+    assert 0 < dv <= 10 * dropped.sum() * mobility
+
+
+def test_plant_diagram_gradient_matches_stepper_chain_rule_and_finite_differences():
+    sm = build_scene_model(Scene.from_yaml(BOX))
+    stepper = ComplementarityStepper(sm.contact_model, ContactAware(1e-3, 0.02), "total", 0.05)
+    builder = DiagramBuilder()
+    plant = builder.AddNamedSystem("box", ComplementarityPlant(stepper))
+    builder.ExportInput(plant.actuation_port, "push")
+    diagram = builder.Build()
+    x0 = np.concatenate([sm.q0 + [0.0, 0.02, 0.1], [0.5, -0.5, 0.0]])  # lands tilted
+    u = np.array([2.0])
+    n = 15
+
+    # the core chain rule over n steps
+    J = np.eye(6)
+    x = x0.copy()
+    for _ in range(n):
+        r = stepper.step(x[None], u[None])
+        J = r.dx_dx[0] @ J
+        x = r.x_next[0]
+    # Drake AutoDiffXd through the whole diagram
+    ad = diagram.ToAutoDiffXd()
+    sim = Simulator_[AutoDiffXd](ad)
+    ctx = sim.get_mutable_context()
+    p = ad.GetSubsystemByName("box")
+    p.SetInitialState(
+        p.GetMyMutableContextFromRoot(ctx), InitializeAutoDiff(x0.reshape(-1, 1)).ravel()
+    )
+    u_ad = InitializeAutoDiff(u.reshape(-1, 1), np.zeros((1, 6))).ravel()  # u held constant
+    ad.get_input_port(0).FixValue(ctx, u_ad)
+    sim.AdvanceTo(n * 0.01)
+    (xN,), (g,) = autodiff.split([p.state_port.Eval(p.GetMyContextFromRoot(ctx))])
+    np.testing.assert_array_equal(xN, x)
+    np.testing.assert_allclose(g, J, rtol=1e-10, atol=1e-12)
+
+    def final(x_init):
+        s = Simulator(diagram)
+        c = s.get_mutable_context()
+        pp = diagram.GetSubsystemByName("box")
+        pp.SetInitialState(pp.GetMyMutableContextFromRoot(c), x_init)
+        diagram.get_input_port(0).FixValue(c, u)
+        s.AdvanceTo(n * 0.01)
+        return pp.state_port.Eval(pp.GetMyContextFromRoot(c)).copy()
+
+    fd = central_difference(final, x0, eps=1e-7)
+    np.testing.assert_allclose(J, fd, atol=1e-5 * (1 + np.abs(fd).max()))
