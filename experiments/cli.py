@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-EXPERIMENTS = ("bouncing-ball",)
+EXPERIMENTS = ("bouncing-ball", "box-convergence")
 
 
 def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test_size: bool) -> int:
@@ -52,6 +52,13 @@ def main(argv: list[str] | None = None) -> int:
             Path(args.out), duration=args.duration, meshcat=not args.no_meshcat, test_size=False
         )
     out = Path(args.out or f"results/{args.name}")
+    if args.name == "box-convergence":
+        from drake_abs.experiments.box_convergence import SweepConfig, report, run
+
+        config = SweepConfig.test_size() if args.test_size else SweepConfig()
+        print(report(run(config, out)))
+        print(f"results written to {out.resolve()}")
+        return 0
     return _run_bouncing_ball(out, duration=None, meshcat=True, test_size=args.test_size)
 
 
