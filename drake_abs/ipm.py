@@ -9,7 +9,8 @@ stopping on the requested central-path point ``mu`` rather than at an arbitrary 
 the returned solution (and its implicit-function-theorem Jacobians) is the unique mu-softened
 solution. ``mu = 0`` solves the exact LCP (hard contact). **A larger mu means more smoothing.**
 
-Algorithm (per problem, vectorised over the batch):
+Algorithm (per problem; the iterations are compiled in :mod:`drake_abs.ipm_kernel`, looped over
+the batch):
 
 1. Scale: ``F' = D^-1 F D^-1`` with ``D ~ sqrt(diag F)``, and ``q' = D^-1 q / c`` with
    ``c = max |D^-1 q|`` (powers of two, so the scaling is exact). The products ``lam_i s_i`` scale
@@ -55,8 +56,9 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array
+from drake_abs.ipm_kernel import iterate
 from drake_abs.matrix_class import MatrixClass, classify_matrix
-from drake_abs.sensitivity import equilibrated_newton_inverse, implicit_jacobians, jacobi_scale
+from drake_abs.sensitivity import implicit_jacobians, jacobi_scale
 
 OnBadMatrix = Literal["raise", "regularize", "attempt", "trusted"]
 
@@ -121,83 +123,6 @@ class LCPResult:
     dlam_dq: np.ndarray | None = None
     dlam_dmu: np.ndarray | None = None
     tol: float = 1e-12
-
-
-def _matvec(F: np.ndarray, x: np.ndarray) -> np.ndarray:
-    if F.ndim == 2:
-        return x @ F.T
-    return np.matmul(F, x[..., None])[..., 0]
-
-
-def _max_step(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-    """Largest a with x + a dx >= 0, per row (inf when dx >= 0). Call under np.errstate."""
-    return np.where(dx < 0, -x / dx, np.inf).min(axis=-1)
-
-
-_TINY = np.finfo(float).tiny
-
-#: Wide-neighbourhood constant: contacts still driving down keep lam_i s_i >= GAMMA * mean.
-GAMMA = 1e-3
-#: Step-length backtracking factors tried for the neighbourhood condition.
-_BACKTRACK = (1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
-
-
-def _neighbourhood_step(L, S, dl, ds, alpha, drive, target, strict) -> np.ndarray:
-    """Largest of ``alpha * _BACKTRACK`` keeping the iterate in the wide neighbourhood
-    ``lam_i s_i >= GAMMA * mean_drive(lam o s)`` for the contacts still driving down, the
-    condition under which path-following interior points converge on monotone (and P*) LCPs.
-
-    For problems known to be monotone (``strict`` False) the floor is relaxed to
-    ``min(GAMMA * mean, target_i / 2)`` (contacts aiming below the others are not held up):
-    measured on ill-conditioned PSD problems (cond 1e10), the strict floor raised failures from
-    3 to 45 of 20736. Non-monotone problems (the friction cone) need the strict floor: sticking
-    contacts are degenerate and, without it, one gap races ahead and the steps collapse."""
-    out = alpha * _BACKTRACK[-1]
-    pending = np.ones(len(alpha), dtype=bool)
-    n_drive = np.maximum(drive.sum(axis=1), 1)
-    for factor in _BACKTRACK:
-        a = (alpha * factor)[:, None]
-        gap = (L + a * dl) * (S + a * ds)
-        mean = np.where(drive, gap, 0.0).sum(axis=1) / n_drive
-        floor = np.where(
-            strict[:, None], GAMMA * mean[:, None], np.minimum(GAMMA * mean[:, None], 0.5 * target)
-        )
-        ok = pending & np.all(~drive | (gap >= floor), axis=1)
-        out[ok] = alpha[ok] * factor
-        pending &= ~ok
-        if not pending.any():
-            break
-    return out
-
-
-def _merit_step(F, q, L, S, dl, ds, alpha, target, gap_scale, row_scale) -> np.ndarray:
-    """Largest of ``alpha * _BACKTRACK`` that decreases the weighted Newton residual
-    ``|| [(lam o s - target) / gap_scale, (s - F lam - q) / row_scale] ||`` by the Armijo
-    fraction. Used once a problem has dropped Mehrotra's correction: on non-monotone LCPs (the
-    friction cone) full Newton steps near a fold of the central path can cycle, which a merit
-    line search prevents."""
-
-    def merit(a):
-        La, Sa = L + a[:, None] * dl, S + a[:, None] * ds
-        rc = (La * Sa - target) / gap_scale
-        rp = (Sa - _matvec(F, La) - q) / row_scale
-        return np.sqrt((rc * rc).sum(axis=1) + (rp * rp).sum(axis=1))
-
-    m0 = merit(np.zeros_like(alpha))
-    out = alpha * _BACKTRACK[-1]
-    pending = np.ones(len(alpha), dtype=bool)
-    for factor in _BACKTRACK:
-        a = alpha * factor
-        ok = pending & (merit(a) <= (1.0 - 1e-4 * a) * m0)
-        out[ok] = a[ok]
-        pending &= ~ok
-        if not pending.any():
-            break
-    return out
-
-
-def _solve(Minv: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    return np.matmul(Minv, rhs[..., None])[..., 0]
 
 
 def _normalise_mu(mu, B: int, d: int, single: bool) -> tuple[np.ndarray, str]:
@@ -280,131 +205,6 @@ def _gap_atol(Fs: np.ndarray, mu_s: np.ndarray, floor: float) -> np.ndarray:
     coupled = np.broadcast_to(coupled, mu_s.shape[:1] + (d, d))
     neighbour_mu = np.where(coupled, mu_s[:, None, :], 0.0).max(axis=-1)
     return floor + 1e-13 * neighbour_mu
-
-
-def _interior_point(
-    Fs: np.ndarray,
-    qs: np.ndarray,
-    mu_s: np.ndarray,
-    gap_scale: np.ndarray,
-    lam: np.ndarray,
-    s: np.ndarray,
-    tol: float,
-    max_iterations: int,
-    monotone: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The iterations of the module docstring on the scaled problem, updating ``lam`` and ``s``
-    (B, d) in place. ``monotone`` (B,) marks problems known to be PSD or P. Returns
-    ``(lam, s, status, iterations, residual)``."""
-    B, d = qs.shape
-    status = np.full(B, LCPStatus.MAX_ITERATIONS, dtype=np.int8)
-    iterations = np.full(B, max_iterations, dtype=np.int64)
-    residual = np.full(B, np.inf)
-    best_mu = np.full(B, np.inf)
-    stalls = np.zeros(B, dtype=np.int64)
-    no_corr = np.zeros(B, dtype=bool)
-    active = np.arange(B)
-    shared = Fs.ndim == 2
-    # |F'|: the size of the terms summed in row i of F' lam' (per-row backward error)
-    Fs_abs = np.abs(Fs)
-    saved_err = np.seterr(all="ignore")  # inf and nan are caught by the checks below
-    try:
-        for k in range(max_iterations + 1):
-            L, S = lam[active], s[active]
-            Fa = Fs if shared else Fs[active]
-            qa, ma, ga = qs[active], mu_s[active], gap_scale[active]
-            FL = _matvec(Fa, L)
-            rp = S - FL - qa
-            Fa_abs = Fs_abs if shared else Fs_abs[active]
-            row_scale = np.abs(qa) + np.abs(S) + _matvec(Fa_abs, np.abs(L)) + _TINY
-            res_p = (np.abs(rp) / row_scale).max(axis=1)
-            gap = L * S
-            res = np.maximum(res_p, (np.abs(gap - ma) / ga).max(axis=1))
-            residual[active] = res
-            done = res <= tol
-            if done.any():
-                status[active[done]] = LCPStatus.CONVERGED
-                iterations[active[done]] = k
-            if k == max_iterations or done.all():
-                break
-            if done.any():  # drop the converged problems from the working set
-                keep = ~done
-                active, L, S, qa, ma, ga, rp, gap, res_p, row_scale = (
-                    a[keep] for a in (active, L, S, qa, ma, ga, rp, gap, res_p, row_scale)
-                )
-                if not shared:
-                    Fa = Fa[keep]
-            # The primal residual, once within tolerance, is roundoff: do not chase it.
-            rp = np.where((res_p <= tol)[:, None], 0.0, rp)
-
-            # Newton matrix K = S + Lam F with its rows equilibrated by 1 / (s + lam): every row
-            # is O(1) whether the contact is far (s >> lam) or deep (lam >> s), so pivoting is
-            # reliable when s / lam spans many decades.
-            Kinv, w = equilibrated_newton_inverse(Fa, L, S)
-            Lrp = L * rp
-            # predictor (affine scaling) direction: target lam o s = 0
-            dl_aff = _solve(Kinv, (Lrp - gap) * w)
-            ds_aff = _matvec(Fa, dl_aff) - rp
-            a_aff = np.minimum(1.0, np.minimum(_max_step(L, dl_aff), _max_step(S, ds_aff)))
-            gap_aff = (L + a_aff[:, None] * dl_aff) * (S + a_aff[:, None] * ds_aff)
-            # contacts still above their own target drive the duality measure down
-            drive = gap - ma > tol * ga
-            n_drive = np.maximum(drive.sum(axis=1), 1)
-            mu_cur = np.where(drive, gap, 0.0).sum(axis=1) / n_drive
-            mu_aff = np.where(drive, gap_aff, 0.0).sum(axis=1) / n_drive
-            ratio = np.minimum(mu_aff / mu_cur, 1.0)
-            sigma = np.where(mu_cur > 0, ratio * ratio * ratio, 0.0)
-            target = np.maximum((sigma * mu_cur)[:, None], ma)
-            # Safeguard: Mehrotra's second-order correction can cycle on ill-conditioned
-            # problems; a problem whose driving duality measure has not fallen below half its
-            # best value for three iterations in a row continues without the correction.
-            stalled = mu_cur > 0.5 * best_mu[active]
-            stalls[active] = np.where(stalled, stalls[active] + 1, 0)
-            best_mu[active] = np.where(stalled, best_mu[active], mu_cur)
-            use_corr = (stalls[active] < 3) & ~no_corr[active]
-            no_corr[active] |= ~use_corr
-            corr = np.where((target > ma) & use_corr[:, None], dl_aff * ds_aff, 0.0)
-            rc = gap - target + corr
-            dl = _solve(Kinv, (Lrp - rc) * w)
-            ds = _matvec(Fa, dl) - rp
-            a_max = np.minimum(_max_step(L, dl), _max_step(S, ds))
-            alpha = np.minimum(1.0, 0.995 * a_max)
-            if d > 1:
-                alpha = _neighbourhood_step(L, S, dl, ds, alpha, drive, ma, ~monotone[active])
-            newton = ~use_corr & ~monotone[active]
-            if newton.any():  # not known monotone, uncorrected: Armijo backtracking
-                alpha[newton] = _merit_step(
-                    Fa if shared else Fa[newton],
-                    qa[newton],
-                    L[newton],
-                    S[newton],
-                    dl[newton],
-                    ds[newton],
-                    alpha[newton],
-                    target[newton],
-                    ga[newton],
-                    row_scale[newton],
-                )
-            alpha = alpha[:, None]
-            L_new = L + alpha * dl
-            S_new = S + alpha * ds
-            # positive and finite (NaN fails both comparisons)
-            ok = ((L_new > 0) & (S_new > 0) & (L_new < np.inf) & (S_new < np.inf)).all(axis=1)
-            if ok.all():
-                lam[active] = L_new
-                s[active] = S_new
-                continue
-            failed = active[~ok]
-            status[failed] = LCPStatus.NUMERICAL_FAILURE
-            iterations[failed] = k
-            lam[active[ok]] = L_new[ok]
-            s[active[ok]] = S_new[ok]
-            active = active[ok]
-            if active.size == 0:
-                break
-    finally:
-        np.seterr(**saved_err)
-    return lam, s, status, iterations, residual
 
 
 def solve_lcp(
@@ -511,8 +311,18 @@ def solve_lcp(
         lam = lam0 * D / c[:, None]
         s = s0 / (D * c[:, None])
 
-    lam, s, status, iterations, residual = _interior_point(
-        Fs, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monotone
+    shared = Fs.ndim == 2
+    status, iterations, residual = iterate(
+        np.ascontiguousarray(Fs[None] if shared else Fs),
+        shared,
+        np.ascontiguousarray(qs),
+        np.ascontiguousarray(mu_s),
+        np.ascontiguousarray(gap_scale),
+        lam,
+        s,
+        float(tol),
+        int(max_iterations),
+        np.ascontiguousarray(monotone),
     )
     with np.errstate(all="ignore"):
         lam_out = lam * c[:, None] / D

@@ -1,0 +1,266 @@
+"""The interior-point iterations of :mod:`drake_abs.ipm`, compiled (numba), one problem at a
+time over a batch: the algorithm and safeguards of the ``ipm`` module docstring, on the scaled
+problem. It is the only implementation of the iterations; :func:`drake_abs.solve_lcp` validates,
+scales and calls it, and computes the implicit Jacobians afterwards.
+
+Work arrays are allocated once per call and reused across problems and iterations; the Newton
+matrix is inverted by Gauss-Jordan elimination with partial pivoting (pseudo-inverse when it is
+singular to working precision).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+CONVERGED, MAX_ITERATIONS, NUMERICAL_FAILURE = 0, 1, 2
+
+#: Wide-neighbourhood constant: contacts still driving down keep lam_i s_i >= GAMMA * mean.
+GAMMA = 1e-3
+#: Step-length backtracking factors (neighbourhood and merit searches).
+BACKTRACK = np.array([1.0, 0.5, 0.25, 0.1, 0.03, 0.01])
+_TINY = np.finfo(np.float64).tiny
+
+
+@nb.njit(cache=True)
+def _invert(K, out, aug):
+    """out = K^-1 by Gauss-Jordan with partial pivoting; False when singular."""
+    d = K.shape[0]
+    for i in range(d):
+        for j in range(d):
+            aug[i, j] = K[i, j]
+            aug[i, d + j] = 1.0 if i == j else 0.0
+    for c in range(d):
+        p = c
+        best = abs(aug[c, c])
+        for r in range(c + 1, d):
+            if abs(aug[r, c]) > best:
+                best = abs(aug[r, c])
+                p = r
+        if not (best > 0.0) or not np.isfinite(best):
+            return False
+        if p != c:
+            for j in range(2 * d):
+                tmp = aug[c, j]
+                aug[c, j] = aug[p, j]
+                aug[p, j] = tmp
+        piv = aug[c, c]
+        for j in range(2 * d):
+            aug[c, j] /= piv
+        for r in range(d):
+            if r != c:
+                f = aug[r, c]
+                if f != 0.0:
+                    for j in range(2 * d):
+                        aug[r, j] -= f * aug[c, j]
+    for i in range(d):
+        for j in range(d):
+            out[i, j] = aug[i, d + j]
+            if not np.isfinite(out[i, j]):
+                return False
+    return True
+
+
+@nb.njit(cache=True)
+def _matvec(A, x, out):
+    d = x.shape[0]
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for j in range(d):
+            acc += A[i, j] * x[j]
+        out[i] = acc
+
+
+@nb.njit(cache=True)
+def _max_step(x, dx):
+    a = np.inf
+    for i in range(x.shape[0]):
+        if dx[i] < 0.0:
+            r = -x[i] / dx[i]
+            if r < a:
+                a = r
+    return a
+
+
+@nb.njit(cache=True)
+def _neighbourhood_ok(L, S, dl, ds, a, drive, target, strict):
+    d = L.shape[0]
+    n = 0
+    total = 0.0
+    for i in range(d):
+        if drive[i]:
+            n += 1
+            total += (L[i] + a * dl[i]) * (S[i] + a * ds[i])
+    mean = total / max(n, 1)
+    for i in range(d):
+        if drive[i]:
+            floor = GAMMA * mean if strict else min(GAMMA * mean, 0.5 * target[i])
+            if (L[i] + a * dl[i]) * (S[i] + a * ds[i]) < floor:
+                return False
+    return True
+
+
+@nb.njit(cache=True)
+def _merit(F, q, L, S, dl, ds, a, target, gap_scale, row_scale, La, FLa):
+    d = L.shape[0]
+    for i in range(d):
+        La[i] = L[i] + a * dl[i]
+    _matvec(F, La, FLa)
+    total = 0.0
+    for i in range(d):
+        Sa = S[i] + a * ds[i]
+        rc = (La[i] * Sa - target[i]) / gap_scale[i]
+        rp = (Sa - FLa[i] - q[i]) / row_scale[i]
+        total += rc * rc + rp * rp
+    return np.sqrt(total)
+
+
+@nb.njit(cache=True)
+def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monotone):
+    """Run the iterations on every problem of the batch, updating ``lam`` and ``s`` (B, d) in
+    place. ``Fs`` is (1, d, d) when ``shared`` else (B, d, d). Returns
+    ``(status, iterations, residual)``, each (B,)."""
+    B, d = qs.shape
+    status = np.full(B, MAX_ITERATIONS, dtype=np.int8)
+    iterations = np.full(B, max_iterations, dtype=np.int64)
+    residual = np.full(B, np.inf)
+    K = np.empty((d, d))
+    Kinv = np.empty((d, d))
+    aug = np.empty((d, 2 * d))
+    FL = np.empty(d)
+    rp = np.empty(d)
+    rs = np.empty(d)
+    gap = np.empty(d)
+    w = np.empty(d)
+    rhs = np.empty(d)
+    dl_aff = np.empty(d)
+    ds_aff = np.empty(d)
+    dl = np.empty(d)
+    ds = np.empty(d)
+    target = np.empty(d)
+    work1 = np.empty(d)
+    work2 = np.empty(d)
+    drive = np.empty(d, dtype=np.bool_)
+    for b in range(B):
+        F = Fs[0] if shared else Fs[b]
+        L = lam[b]
+        S = s[b]
+        q = qs[b]
+        ma = mu_s[b]
+        ga = gap_scale[b]
+        strict = not monotone[b]
+        best_mu = np.inf
+        stalls = 0
+        no_corr = False
+        for k in range(max_iterations + 1):
+            # residuals: each row's backward error, and complementarity against the targets
+            res_p = 0.0
+            for i in range(d):
+                fl = 0.0
+                fa = 0.0
+                for j in range(d):
+                    fl += F[i, j] * L[j]
+                    fa += abs(F[i, j]) * abs(L[j])
+                FL[i] = fl
+                rp[i] = S[i] - fl - q[i]
+                rs[i] = abs(q[i]) + abs(S[i]) + fa + _TINY
+                res_p = max(res_p, abs(rp[i]) / rs[i])
+            res = res_p
+            for i in range(d):
+                gap[i] = L[i] * S[i]
+                res = max(res, abs(gap[i] - ma[i]) / ga[i])
+            residual[b] = res
+            if res <= tol:
+                status[b] = CONVERGED
+                iterations[b] = k
+                break
+            if k == max_iterations:
+                break
+            if res_p <= tol:  # the primal residual is roundoff now: do not chase it
+                for i in range(d):
+                    rp[i] = 0.0
+            # Newton matrix S + Lam F, rows equilibrated by w = 1 / (s + lam)
+            for i in range(d):
+                w[i] = 1.0 / (S[i] + L[i])
+                for j in range(d):
+                    K[i, j] = L[i] * F[i, j] * w[i]
+                K[i, i] += S[i] * w[i]
+            if not _invert(K, Kinv, aug):
+                Kinv[:, :] = np.linalg.pinv(np.where(np.isfinite(K), K, 0.0))
+            # predictor (affine scaling): target lam o s = 0
+            for i in range(d):
+                rhs[i] = (L[i] * rp[i] - gap[i]) * w[i]
+            _matvec(Kinv, rhs, dl_aff)
+            _matvec(F, dl_aff, ds_aff)
+            for i in range(d):
+                ds_aff[i] -= rp[i]
+            a_aff = min(1.0, _max_step(L, dl_aff), _max_step(S, ds_aff))
+            n_drive = 0
+            mu_cur = 0.0
+            mu_aff = 0.0
+            for i in range(d):
+                drive[i] = gap[i] - ma[i] > tol * ga[i]
+                if drive[i]:
+                    n_drive += 1
+                    mu_cur += gap[i]
+                    mu_aff += (L[i] + a_aff * dl_aff[i]) * (S[i] + a_aff * ds_aff[i])
+            mu_cur /= max(n_drive, 1)
+            mu_aff /= max(n_drive, 1)
+            sigma = 0.0
+            if mu_cur > 0.0:
+                ratio = min(mu_aff / mu_cur, 1.0)
+                sigma = ratio * ratio * ratio
+            # safeguard: drop Mehrotra's correction once the measure stalls (it can cycle)
+            if mu_cur > 0.5 * best_mu:
+                stalls += 1
+            else:
+                stalls = 0
+                best_mu = mu_cur
+            use_corr = stalls < 3 and not no_corr
+            if not use_corr:
+                no_corr = True
+            # corrector: centre on max(sigma mu, mu_i), never below the requested target
+            for i in range(d):
+                t = max(sigma * mu_cur, ma[i])
+                target[i] = t
+                corr = dl_aff[i] * ds_aff[i] if (t > ma[i] and use_corr) else 0.0
+                rhs[i] = (L[i] * rp[i] - (gap[i] - t + corr)) * w[i]
+            _matvec(Kinv, rhs, dl)
+            _matvec(F, dl, ds)
+            for i in range(d):
+                ds[i] -= rp[i]
+            a_max = min(_max_step(L, dl), _max_step(S, ds))
+            alpha = min(1.0, 0.995 * a_max)
+            if d > 1:
+                chosen = alpha * BACKTRACK[-1]
+                for f in BACKTRACK:
+                    if _neighbourhood_ok(L, S, dl, ds, alpha * f, drive, ma, strict):
+                        chosen = alpha * f
+                        break
+                alpha = chosen
+            if strict and not use_corr:  # non-monotone, uncorrected: Armijo on the residual
+                m0 = _merit(F, q, L, S, dl, ds, 0.0, target, ga, rs, work1, work2)
+                chosen = alpha * BACKTRACK[-1]
+                for f in BACKTRACK:
+                    a = alpha * f
+                    if (
+                        _merit(F, q, L, S, dl, ds, a, target, ga, rs, work1, work2)
+                        <= (1.0 - 1e-4 * a) * m0
+                    ):
+                        chosen = a
+                        break
+                alpha = chosen
+            ok = True
+            for i in range(d):
+                ln = L[i] + alpha * dl[i]
+                sn = S[i] + alpha * ds[i]
+                if not (ln > 0.0 and sn > 0.0 and ln < np.inf and sn < np.inf):
+                    ok = False
+            if not ok:  # keep the last finite iterate, flag the problem
+                status[b] = NUMERICAL_FAILURE
+                iterations[b] = k
+                break
+            for i in range(d):
+                L[i] += alpha * dl[i]
+                S[i] += alpha * ds[i]
+    return status, iterations, residual
