@@ -115,6 +115,7 @@ class MultibodyContactModel:
             self._bodies.append(body)
         self._context = plant.CreateDefaultContext()
         self._bodies_d = [plant.get_body(b.index()) for b in self._bodies]
+        self._unit_v_d = list(np.eye(self.nv))
         self._unit_v = [
             np.array([AutoDiffXd(float(i == j)) for i in range(self.nv)]) for j in range(self.nv)
         ]
@@ -146,35 +147,28 @@ class MultibodyContactModel:
         """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
         (indices; all by default), with derivatives unless ``derivatives=False``."""
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
-        per_state = [self._one(qb, vb, ub, active) for qb, vb, ub in zip(q, v, u, strict=True)]
-        keys = per_state[0] if derivatives else [k for k in per_state[0] if not k.startswith("d")]
-        fields = {k: np.stack([s[k] for s in per_state]) for k in keys}
+        per_state = [
+            self._one(qb, vb, ub, active, derivatives) for qb, vb, ub in zip(q, v, u, strict=True)
+        ]
+        fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
         return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
 
-    def _one(self, q, v, u, active) -> dict:
-        plant, ctx = self.plant_ad, self.context_ad
-        nq, nv, nu = self.nq, self.nv, self.nu
-        P = nq + nv + nu
-        q_ad = InitializeAutoDiff(np.reshape(q, (-1, 1)), P, 0).ravel()
-        v_ad = InitializeAutoDiff(np.reshape(v, (-1, 1)), P, nq).ravel()
-        u_ad = InitializeAutoDiff(np.reshape(u, (-1, 1)), P, nq + nv).ravel()
-        plant.SetPositions(ctx, q_ad)
-        plant.SetVelocities(ctx, v_ad)
-        M, dM = _split(plant.CalcMassMatrix(ctx), P)
-        tau = self.B_act @ u_ad + plant.CalcGravityGeneralizedForces(ctx) - plant.CalcBiasTerm(ctx)
-        tau, dtau = _split(tau, P)
-        W = np.linalg.inv(M)
-        dW = -np.einsum("ij,jkp,kl->ilp", W, dM, W)
-        dv_free = np.zeros((nv, P))
-        dv_free[:, nq : nq + nv] = np.eye(nv)
-        dv_free += self.h * (np.einsum("ijp,j->ip", dW, tau) + W @ dtau)
-        v_free = np.asarray(v, float) + self.h * W @ tau
-        N_ad = np.stack([plant.MapVelocityToQDot(ctx, e) for e in self._unit_v], axis=1)
-        N, dN = _split(N_ad, P)
+    def _evaluate(self, plant, ctx, q, v, u, active, unit_v) -> dict:
+        """M, tau, N, phi, Jn, Jt of one state, in the plant's scalar type (double, or
+        AutoDiffXd seeded on p = (q, v, u)): one code path for values and derivatives."""
+        nv = self.nv
+        plant.SetPositions(ctx, q)
+        plant.SetVelocities(ctx, v)
+        out = {"M": plant.CalcMassMatrix(ctx)}
+        out["tau"] = (
+            self.B_act @ u + plant.CalcGravityGeneralizedForces(ctx) - plant.CalcBiasTerm(ctx)
+        )
+        out["N"] = np.stack([plant.MapVelocityToQDot(ctx, e) for e in unit_v], axis=1)
         phi, Jn, Jt = [], [], []
         world = plant.world_frame()
         for i in active:
-            contact, body = self.contacts[i], self._bodies[i]
+            contact = self.contacts[i]
+            body = self._bodies[i] if plant is self.plant_ad else self._bodies_d[i]
             X_WB = plant.EvalBodyPoseInWorld(ctx, body)
             p_WC = X_WB.multiply(np.asarray(contact.p_BC, float))
             phi.append(self.normal @ p_WC - contact.radius - self.ground.height)
@@ -186,10 +180,37 @@ class MultibodyContactModel:
             Jn.append(self.normal @ J)
             if contact.friction is not None:
                 Jt.extend(self.tangents @ J)
-        phi, dphi = _split(np.array(phi, dtype=object).reshape(len(active)), P)
-        Jn, dJn = _split(np.array(Jn, dtype=object).reshape(len(active), nv), P)
-        Jt_arr = np.array(Jt, dtype=object).reshape(len(Jt), nv)
-        Jt, dJt = _split(Jt_arr, P) if len(Jt) else (np.zeros((0, nv)), np.zeros((0, nv, P)))
+        kind = object if plant is self.plant_ad else float
+        out["phi"] = np.array(phi, dtype=kind).reshape(len(active))
+        out["Jn"] = np.array(Jn, dtype=kind).reshape(len(active), nv)
+        out["Jt"] = np.array(Jt, dtype=kind).reshape(len(Jt), nv)
+        return out
+
+    def _one(self, q, v, u, active, derivatives: bool) -> dict:
+        nq, nv, nu = self.nq, self.nv, self.nu
+        h = self.h
+        if not derivatives:
+            e = self._evaluate(self.plant, self._context, q, v, u, active, self._unit_v_d)
+            W = np.linalg.inv(e["M"])
+            v_free = np.asarray(v, float) + h * W @ e["tau"]
+            return dict(W=W, v_free=v_free, phi=e["phi"], Jn=e["Jn"], Jt=e["Jt"], N=e["N"])
+        P = nq + nv + nu
+        q_ad = InitializeAutoDiff(np.reshape(q, (-1, 1)), P, 0).ravel()
+        v_ad = InitializeAutoDiff(np.reshape(v, (-1, 1)), P, nq).ravel()
+        u_ad = InitializeAutoDiff(np.reshape(u, (-1, 1)), P, nq + nv).ravel()
+        e = self._evaluate(self.plant_ad, self.context_ad, q_ad, v_ad, u_ad, active, self._unit_v)
+        M, dM = _split(e["M"], P)
+        tau, dtau = _split(e["tau"], P)
+        N, dN = _split(e["N"], P)
+        phi, dphi = _split(e["phi"], P)
+        Jn, dJn = _split(e["Jn"], P)
+        Jt, dJt = _split(e["Jt"], P) if e["Jt"].size else (np.zeros((0, nv)), np.zeros((0, nv, P)))
+        W = np.linalg.inv(M)
+        dW = -np.einsum("ij,jkp,kl->ilp", W, dM, W)
+        dv_free = np.zeros((nv, P))
+        dv_free[:, nq : nq + nv] = np.eye(nv)
+        dv_free += h * (np.einsum("ijp,j->ip", dW, tau) + W @ dtau)
+        v_free = np.asarray(v, float) + h * W @ tau
         return dict(
             W=W, v_free=v_free, phi=phi, Jn=Jn, Jt=Jt, N=N,
             dW=dW, dv_free=dv_free, dphi=dphi, dJn=dJn, dJt=dJt, dN=dN,
