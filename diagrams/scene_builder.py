@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,8 +63,24 @@ class SceneModel:
     v0: np.ndarray
 
 
-def add_scene_models(plant: MultibodyPlant, scene: Scene, parser: Parser | None = None) -> None:
-    """Parse the scene's models into ``plant`` (not finalized), with welds and actuators."""
+_COLLISION = re.compile(r"<collision\b.*?</collision>|<collision\b[^>]*/>", re.DOTALL)
+
+
+def _parse(parser: Parser, path: Path, collisions: bool):
+    """Parse one model file; without its collision elements when ``collisions`` is False (with
+    a SceneGraph attached, Drake refuses e.g. STL collision meshes; the scene declares its own
+    contacts anyway)."""
+    if collisions:
+        return parser.AddModels(str(path))
+    text = _COLLISION.sub("", path.read_text())
+    return parser.AddModelsFromString(text, path.suffix.lstrip("."))
+
+
+def add_scene_models(
+    plant: MultibodyPlant, scene: Scene, parser: Parser | None = None, *, collisions: bool = True
+) -> None:
+    """Parse the scene's models into ``plant`` (not finalized), with welds and actuators;
+    ``collisions=False`` leaves the files' collision geometry out."""
     parser = parser or Parser(plant)
     if any(m.file.startswith("example-robot-data:") for m in scene.models):
         parser.package_map().Add("example-robot-data", str(example_robot_data_dir()))
@@ -72,7 +89,7 @@ def add_scene_models(plant: MultibodyPlant, scene: Scene, parser: Parser | None 
             if package.is_dir() and not parser.package_map().Contains(package.name):
                 parser.package_map().Add(package.name, str(package))
     for spec in scene.models:
-        instances = parser.AddModels(str(resolve_model_file(spec)))
+        instances = _parse(parser, resolve_model_file(spec), collisions)
         instance = instances[0]
         if spec.name:
             plant.RenameModelInstance(instance, spec.name)
