@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Box, SceneGraph, Sphere
+from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, SceneGraph, Sphere
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import (
@@ -41,16 +41,35 @@ class DrakeTwin:
     scene_graph: SceneGraph
 
 
+def _properties(mu: float, material: dict | None) -> ProximityProperties:
+    props = ProximityProperties()
+    material = material or {}
+    AddContactMaterial(
+        dissipation=material.get("hunt_crossley_dissipation"),
+        point_stiffness=material.get("point_stiffness"),
+        friction=CoulombFriction(mu, mu),
+        properties=props,
+    )
+    if "relaxation_time" in material:
+        props.AddProperty("material", "relaxation_time", material["relaxation_time"])
+    return props
+
+
 def make_drake_twin(
     scene: Scene,
     approximation: str = "sap",
     *,
     time_step: float | None = None,
     sampled_outputs: bool = True,
+    material: dict | None = None,
 ) -> DrakeTwin:
     """The scene as a discrete Drake MultibodyPlant with ``approximation`` in sap, similar,
     lagged. Coordinates match :func:`~drake_abs.diagrams.scene_builder.build_scene_model`
-    (roll-pitch-yaw floating bases), so states can be compared entry by entry."""
+    (roll-pitch-yaw floating bases), so states can be compared entry by entry.
+
+    ``material``: optional point-contact parameters ``point_stiffness`` (N/m),
+    ``hunt_crossley_dissipation`` (s/m) and ``relaxation_time`` (s, SAP); Drake's defaults
+    otherwise."""
     if approximation not in APPROXIMATIONS:
         raise ValueError(f"approximation must be one of {sorted(APPROXIMATIONS)}")
     builder = DiagramBuilder()
@@ -71,7 +90,7 @@ def make_drake_twin(
                 RigidTransform(np.asarray(p, float)),
                 Sphere(contact.radius or POINT_RADIUS),
                 f"contact_{k}_{j}",
-                CoulombFriction(mu, mu),
+                _properties(mu, material),
             )
     n = np.asarray(scene.ground_normal, float)
     if not np.allclose(n, [0, 0, 1]):
@@ -84,7 +103,7 @@ def make_drake_twin(
         RigidTransform([0.0, 0.0, scene.ground_height - 0.5]),
         Box(50.0, 50.0, 1.0),
         "ground",
-        CoulombFriction(mu_ground, mu_ground),
+        _properties(mu_ground, material),
     )
     plant.set_contact_model(ContactModel.kPoint)
     plant.set_discrete_contact_approximation(APPROXIMATIONS[approximation])

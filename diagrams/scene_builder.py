@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import numpy as np
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import BaseBodyJointType, MultibodyPlant
 
+from drake_abs.diagrams.model_files import add_models_without_collisions
 from drake_abs.scene import ModelSpec, Scene
 from drake_abs.systems.multibody_quantities import GroundPlane, MultibodyContactModel, PointContact
 
@@ -63,24 +63,18 @@ class SceneModel:
     v0: np.ndarray
 
 
-_COLLISION = re.compile(r"<collision\b.*?</collision>|<collision\b[^>]*/>", re.DOTALL)
-
-
 def _parse(parser: Parser, path: Path, collisions: bool):
-    """Parse one model file; without its collision elements when ``collisions`` is False (with
-    a SceneGraph attached, Drake refuses e.g. STL collision meshes; the scene declares its own
-    contacts anyway)."""
     if collisions:
         return parser.AddModels(str(path))
-    text = _COLLISION.sub("", path.read_text())
-    return parser.AddModelsFromString(text, path.suffix.lstrip("."))
+    return add_models_without_collisions(parser, path)
 
 
 def add_scene_models(
     plant: MultibodyPlant, scene: Scene, parser: Parser | None = None, *, collisions: bool = True
 ) -> None:
     """Parse the scene's models into ``plant`` (not finalized), with welds and actuators;
-    ``collisions=False`` leaves the files' collision geometry out."""
+    ``collisions=False`` leaves the files' collision geometry out (and draws STL visuals through
+    OBJ copies; see :mod:`drake_abs.diagrams.model_files`)."""
     parser = parser or Parser(plant)
     if any(m.file.startswith("example-robot-data:") for m in scene.models):
         parser.package_map().Add("example-robot-data", str(example_robot_data_dir()))

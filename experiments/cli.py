@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-EXPERIMENTS = ("bouncing-ball", "box-convergence")
+EXPERIMENTS = ("bouncing-ball", "box-convergence", "drake-comparison")
 
 
 def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test_size: bool) -> int:
@@ -35,6 +35,26 @@ def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test
     return 0
 
 
+def _record(scene_arg: str, steps: int, out: str | None) -> int:
+    from drake_abs.diagrams.scene_builder import PACKAGE_DIR
+    from drake_abs.diagrams.scene_visualization import record_scene
+    from drake_abs.scene import Scene
+
+    path = Path(scene_arg)
+    if not path.is_file():
+        path = PACKAGE_DIR / "scenes" / f"{scene_arg}.yaml"
+    if not path.is_file():
+        shipped = sorted(p.stem for p in (PACKAGE_DIR / "scenes").glob("*.yaml"))
+        print(f"no scene {scene_arg!r}: give a YAML file or one of {shipped}", file=sys.stderr)
+        return 2
+    scene = Scene.from_yaml(path)
+    html = Path(out or f"results/{scene.name}.html")
+    html.parent.mkdir(parents=True, exist_ok=True)
+    record_scene(scene, steps, html)
+    print(f"recorded {steps} steps of {scene.name} (Meshcat, localhost) to {html.resolve()}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="drake-abs", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -46,12 +66,25 @@ def main(argv: list[str] | None = None) -> int:
     exp.add_argument("name", choices=EXPERIMENTS)
     exp.add_argument("--out", default=None, help="results folder (default: results/NAME)")
     exp.add_argument("--test-size", action="store_true", help="the reduced size CI runs")
+    rec = sub.add_parser("record", help="record a scene's rollout as a self-contained HTML page")
+    rec.add_argument("scene", help="a scene YAML, or the name of a shipped scene (e.g. box_push)")
+    rec.add_argument("--steps", type=int, default=100)
+    rec.add_argument("--out", default=None, help="HTML file (default: results/SCENE.html)")
     args = parser.parse_args(argv)
+    if args.command == "record":
+        return _record(args.scene, args.steps, args.out)
     if args.command == "demo":
         return _run_bouncing_ball(
             Path(args.out), duration=args.duration, meshcat=not args.no_meshcat, test_size=False
         )
     out = Path(args.out or f"results/{args.name}")
+    if args.name == "drake-comparison":
+        from drake_abs.experiments.drake_comparison import ComparisonConfig, report, run
+
+        config = ComparisonConfig.test_size() if args.test_size else ComparisonConfig()
+        print(report(run(out, config)))
+        print(f"results written to {out.resolve()}")
+        return 0
     if args.name == "box-convergence":
         from drake_abs.experiments.box_convergence import SweepConfig, report, run
 

@@ -128,6 +128,9 @@ class ComplementarityStepper:
         nc_g, nt, _ = cone.sizes()
         out["x_next"][rows] = np.concatenate([r.q_next, r.v_next], axis=1)
         out["converged"][rows] = r.converged
+        if jacobians:  # also without contact (free flight): the Jacobian is the free step's
+            out["dx_dx"][rows] = r.dx_dx
+            out["dx_du"][rows] = r.dx_du
         if r.lcp is None:
             return
         out["iterations"][rows] = r.lcp.iterations
@@ -139,8 +142,6 @@ class ComplementarityStepper:
         fr = idx[cone.frictional]
         out["friction_impulse"][np.ix_(rows, fr)] = beta @ self.model.tangents
         if jacobians:
-            out["dx_dx"][rows] = r.dx_dx
-            out["dx_du"][rows] = r.dx_du
             out["dn_dx"][grid] = r.dlam_dx[:, :nc_g]
             out["dn_du"][grid] = r.dlam_du[:, :nc_g]
 

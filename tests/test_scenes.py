@@ -135,3 +135,19 @@ def test_plant_diagram_gradient_matches_stepper_chain_rule_and_finite_difference
 
     fd = central_difference(final, x0, eps=1e-7)
     np.testing.assert_allclose(J, fd, atol=1e-5 * (1 + np.abs(fd).max()))
+
+
+def test_free_flight_step_has_the_free_jacobian():
+    """No contact within the activation distance: no LCP, and the Jacobian is the free step's
+    (regression: it was left uninitialised)."""
+    sm = build_scene_model(Scene.from_yaml(BOX))
+    stepper = ComplementarityStepper(sm.contact_model, Exact(), activation_distance=0.05)
+    x = np.concatenate([sm.q0 + [0.0, 0.5, 0.0], [1.0, 0.0, 0.0]])  # 0.5 m up
+    r = stepper.step(x[None], np.array([[1.0]]))
+    assert not r.active.any()
+
+    def step(p):
+        return stepper.step(p[None, :6], p[None, 6:], jacobians=False).x_next[0]
+
+    fd = central_difference(step, np.concatenate([x, [1.0]]), eps=1e-6)
+    np.testing.assert_allclose(np.concatenate([r.dx_dx[0], r.dx_du[0]], axis=1), fd, atol=1e-8)
