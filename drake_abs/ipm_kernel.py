@@ -4,8 +4,8 @@ problem. It is the only implementation of the iterations; :func:`drake_abs.solve
 scales and calls it, and computes the implicit Jacobians afterwards.
 
 Work arrays are allocated once per call and reused across problems and iterations; the Newton
-matrix is inverted by Gauss-Jordan elimination with partial pivoting (pseudo-inverse when it is
-singular to working precision).
+matrix is inverted by Gauss-Jordan elimination with partial pivoting for d <= 16 and by LAPACK
+above (pseudo-inverse when it is singular to working precision).
 """
 
 from __future__ import annotations
@@ -20,6 +20,8 @@ GAMMA = 1e-3
 #: Step-length backtracking factors (neighbourhood and merit searches).
 BACKTRACK = np.array([1.0, 0.5, 0.25, 0.1, 0.03, 0.01])
 _TINY = np.finfo(np.float64).tiny
+#: Above this size the Newton matrix is inverted by LAPACK, below by the unrolled Gauss-Jordan.
+_LAPACK_FROM = 16
 
 
 @nb.njit(cache=True)
@@ -185,7 +187,15 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
                 for j in range(d):
                     K[i, j] = L[i] * F[i, j] * w[i]
                 K[i, i] += S[i] * w[i]
-            if not _invert(K, Kinv, aug):
+            if d > _LAPACK_FROM:  # LAPACK wins for larger matrices
+                try:
+                    Kinv[:, :] = np.linalg.inv(K)
+                    inverted = np.all(np.isfinite(Kinv))
+                except Exception:  # singular
+                    inverted = False
+            else:
+                inverted = _invert(K, Kinv, aug)
+            if not inverted:
                 Kinv[:, :] = np.linalg.pinv(np.where(np.isfinite(K), K, 0.0))
             # predictor (affine scaling): target lam o s = 0
             for i in range(d):
