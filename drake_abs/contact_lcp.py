@@ -22,8 +22,11 @@ without the P-matrix check (``on_bad_matrix="attempt"``) and reports per problem
 converged; it never returns an unconverged solve as valid.
 
 Smoothing: the policy sees the normal rows (distances z_n, compliance block F_nn) and gives one
-mu per contact (**larger is smoother**); that contact's friction and cone rows get mu / h, the
-same softening expressed in velocity units (their slacks are m/s, not m). In the ``total``
+mu per contact (**larger is smoother**); that contact's friction and cone rows get mu / h. Divided
+by h, the normal row is a velocity-level complementarity like the friction rows, so this is one
+central-path value kappa = mu / h for every velocity-level pair of the contact (the uniform
+relaxation Dojo uses). Barrier smoothing applied everywhere therefore also softens stick-slip
+(a sliding body creeps to a stop); ABS smooths only while a contact closes in. In the ``total``
 gradient mode mu is differentiated through z_n (not through F_nn).
 
 Jacobians (MATH.md section 4 chain rule): with p = (q, v, u) and ``f = G^T lam`` (G = [Jn; Jt]),
