@@ -92,6 +92,10 @@ def box_scene(folder: Path, friction: float, mass: float, ratio: float, h: float
             "models": [{"file": str(path)}],
             "contacts": [{"body": "box", "points": corners, "friction": friction or None}],
             "friction_directions": 2,
+            # as in the shipped scenes: the upper edges, 0.2 m up, stay out of the LCP (with
+            # them in, a smoothed far contact's friction cone nearly collapses; measured on the
+            # CI grid: 526 of 576 steps converged with them, 558 without)
+            "activation_distance": 0.05,
             "smoothing": smoothing,
             # dropped tilted from 2 cm, sliding at 1 m/s and spinning
             "initial_state": {"q": [0.0, 0.13, 0.15], "v": [1.0, -0.5, 1.0]},
@@ -105,7 +109,9 @@ def run_case(scene: Scene, steps: int, push: float) -> dict:
     from drake_abs.systems import ComplementarityStepper
 
     sm = build_scene_model(scene)
-    stepper = ComplementarityStepper(sm.contact_model, scene.smoothing_policy())
+    stepper = ComplementarityStepper(
+        sm.contact_model, scene.smoothing_policy(), activation_distance=scene.activation_distance
+    )
     x = np.concatenate([sm.q0, sm.v0])[None]
     u = np.array([[push]])
     converged, iterations, worst = [], [], 0.0
