@@ -48,6 +48,7 @@ are raised to it and ``result.mu_target`` reports the raised value.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from enum import IntEnum
@@ -379,21 +380,6 @@ def _report(result: LCPResult, strict: bool, max_iterations: int) -> None:
 
 
 def _squeeze(r: LCPResult) -> LCPResult:
-    def first(a):
-        return None if a is None else a[0]
-
-    return LCPResult(
-        lam=r.lam[0],
-        slack=r.slack[0],
-        mu=r.mu[0],
-        mu_target=r.mu_target[0],
-        iterations=r.iterations[0],
-        converged=r.converged[0],
-        status=r.status[0],
-        residual=r.residual[0],
-        regularization=r.regularization[0],
-        matrix_class=r.matrix_class[0],
-        dlam_dq=first(r.dlam_dq),
-        dlam_dmu=first(r.dlam_dmu),
-        tol=r.tol,
-    )
+    """The single-problem view: every per-problem field without its leading batch axis."""
+    fields = {f.name: getattr(r, f.name) for f in dataclasses.fields(r) if f.name != "tol"}
+    return dataclasses.replace(r, **{k: None if v is None else v[0] for k, v in fields.items()})

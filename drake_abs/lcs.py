@@ -98,7 +98,7 @@ class LCS:
                 f"got {sorted(unknown)}"
             )
         # One matrix check here, so that every step can skip it.
-        arrays["F"], _, classes = apply_matrix_policy(arrays["F"], self.on_bad_matrix)
+        arrays["F"] = apply_matrix_policy(arrays["F"], self.on_bad_matrix)[0]
         verified = self.on_bad_matrix != "attempt"
         object.__setattr__(self, "_step_check", "trusted" if verified else "attempt")
         for name, arr in arrays.items():

@@ -16,7 +16,7 @@ and Gaussian-matched), side by side in one Drake diagram. Written to the results
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import matplotlib
@@ -51,7 +51,6 @@ class BouncingBallConfig:
     abs_length: float = 0.05
     gaussian_sigma: float = 0.02
     meshcat: bool = True
-    extra: dict = field(default_factory=dict)
 
     def cases(self) -> dict[str, SmoothingPolicy]:
         """Case name -> smoothing policy (larger mu = more smoothing)."""
@@ -118,7 +117,7 @@ def run(out_dir: str | Path, config: BouncingBallConfig | None = None) -> dict:
     if meshcat is not None:
         files["meshcat_html"] = out / "bouncing_ball.html"
         files["meshcat_html"].write_text(meshcat.StaticHtml())
-    summary = {"config": {k: v for k, v in asdict(config).items() if k != "extra"}, "cases": {}}
+    summary = {"config": asdict(config), "cases": {}}
     jac = {name: step_jacobians(config, trajectories[name], cases[name]) for name in cases}
     h = config.time_step
     for name, xs in trajectories.items():

@@ -37,3 +37,9 @@ def split(arrays: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]
 def join(value: np.ndarray, gradient: np.ndarray) -> np.ndarray:
     """An AutoDiffXd vector (n,) with the given value (n,) and gradient (n, k)."""
     return InitializeAutoDiff(value.reshape(-1, 1), gradient).ravel()
+
+
+def chain(value: np.ndarray, d_dx: np.ndarray, d_du: np.ndarray, gx, gu) -> np.ndarray:
+    """An AutoDiffXd vector with ``value`` and the chain rule ``d_dx gx + d_du gu``: a step's
+    Jacobians (computed in double) applied to the derivatives its inputs x, u carried in."""
+    return join(value, d_dx @ gx + d_du @ gu)

@@ -95,7 +95,10 @@ class ComplementarityStepper:
             raise ValueError("x and u must be finite")
         B = x.shape[0]
         q, v = x[:, :nq], x[:, nq:]
-        active = self.model.distances(q) <= self.activation_distance
+        if np.isfinite(self.activation_distance):
+            active = self.model.distances(q) <= self.activation_distance
+        else:  # nothing to prune: skip the distance evaluation
+            active = np.ones((B, nc), dtype=bool)
         out = {
             "x_next": np.empty((B, nq + nv)),
             "normal_impulse": np.zeros((B, nc)),
@@ -196,8 +199,8 @@ def ComplementarityPlant_(T):
             if autodiff.is_autodiff(x) or autodiff.is_autodiff(u):
                 (xv, uv), (gx, gu) = autodiff.split([x, u])
                 r = self.stepper.step(xv[None], uv[None], jacobians=True)
-                x_next = autodiff.join(r.x_next[0], r.dx_dx[0] @ gx + r.dx_du[0] @ gu)
-                impulse = autodiff.join(r.normal_impulse[0], r.dn_dx[0] @ gx + r.dn_du[0] @ gu)
+                x_next = autodiff.chain(r.x_next[0], r.dx_dx[0], r.dx_du[0], gx, gu)
+                impulse = autodiff.chain(r.normal_impulse[0], r.dn_dx[0], r.dn_du[0], gx, gu)
                 mu = autodiff.join(r.mu[0], np.zeros((r.mu.shape[1], gx.shape[1])))
             else:
                 r = self.stepper.step(np.asarray(x)[None], np.asarray(u)[None], jacobians=False)

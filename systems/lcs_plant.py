@@ -95,9 +95,9 @@ def LcsPlant_(T):
             if autodiff.is_autodiff(x) or autodiff.is_autodiff(u):
                 (xv, uv), (gx, gu) = autodiff.split([x, u])
                 r = step(xv, uv, self.smoothing, gradient=self.gradient, jacobians=True)
-                x_next = autodiff.join(r.x_next, r.dx_dx @ gx + r.dx_du @ gu)
-                lam = autodiff.join(r.lam, r.dlam_dx @ gx + r.dlam_du @ gu)
-                mu = autodiff.join(r.mu, r.dmu_dx @ gx + r.dmu_du @ gu)
+                x_next = autodiff.chain(r.x_next, r.dx_dx, r.dx_du, gx, gu)
+                lam = autodiff.chain(r.lam, r.dlam_dx, r.dlam_du, gx, gu)
+                mu = autodiff.chain(r.mu, r.dmu_dx, r.dmu_du, gx, gu)
             else:
                 r = step(x, u, self.smoothing, gradient=self.gradient, jacobians=False)
                 x_next, lam, mu = r.x_next, r.lam, r.mu
