@@ -55,6 +55,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_abs/__init__
+
 import numpy as np
 
 import drake_abs.ipm

@@ -13,7 +13,6 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import (
     AddMultibodyPlantSceneGraph,
-    BaseBodyJointType,
     ContactModel,
     CoulombFriction,
     DiscreteContactApproximation,
@@ -65,7 +64,7 @@ def make_drake_twin(
 ) -> DrakeTwin:
     """The scene as a discrete Drake MultibodyPlant with ``approximation`` in sap, similar,
     lagged. Coordinates match :func:`~drake_abs.diagrams.scene_builder.build_scene_model`
-    (roll-pitch-yaw floating bases), so states can be compared entry by entry.
+    (floating bases as joint chains), so states can be compared entry by entry.
 
     ``material``: optional point-contact parameters ``point_stiffness`` (N/m),
     ``hunt_crossley_dissipation`` (s/m) and ``relaxation_time`` (s, SAP); Drake's defaults
@@ -74,7 +73,6 @@ def make_drake_twin(
         raise ValueError(f"approximation must be one of {sorted(APPROXIMATIONS)}")
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step or scene.time_step)
-    plant.SetBaseBodyJointType(BaseBodyJointType.kRpyFloatingJoint)
     add_scene_models(plant, scene, Parser(plant, scene_graph), collisions=False)
     for k, contact in enumerate(scene.contacts):
         instance = plant.GetModelInstanceByName(contact.model) if contact.model else None

@@ -8,11 +8,23 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import BaseBodyJointType, MultibodyPlant
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import (
+    ModelInstanceIndex,
+    PrismaticJoint,
+    RevoluteJoint,
+    SpatialInertia,
+)
 
 from drake_abs.diagrams.model_files import add_models_without_collisions
 from drake_abs.scene import ModelSpec, Scene
-from drake_abs.systems.multibody_quantities import GroundPlane, MultibodyContactModel, PointContact
+from drake_abs.systems.multibody_quantities import (
+    ContactModelBase,
+    GroundPlane,
+    MultibodyContactModel,
+    PointContact,
+)
+from drake_abs.systems.pinocchio_dynamics import PinocchioContactModel
 
 PACKAGE_DIR = Path(__import__("drake_abs").__file__).resolve().parent
 
@@ -58,7 +70,7 @@ class SceneModel:
 
     scene: Scene
     plant: MultibodyPlant
-    contact_model: MultibodyContactModel
+    contact_model: ContactModelBase
     q0: np.ndarray
     v0: np.ndarray
 
@@ -72,9 +84,10 @@ def _parse(parser: Parser, path: Path, collisions: bool):
 def add_scene_models(
     plant: MultibodyPlant, scene: Scene, parser: Parser | None = None, *, collisions: bool = True
 ) -> None:
-    """Parse the scene's models into ``plant`` (not finalized), with welds and actuators;
-    ``collisions=False`` leaves the files' collision geometry out (and draws STL visuals through
-    OBJ copies; see :mod:`drake_abs.diagrams.model_files`)."""
+    """Parse the scene's models into ``plant`` (not finalized), with welds, actuators and
+    floating bases (:func:`add_floating_base_chains`); ``collisions=False`` leaves the files'
+    collision geometry out (and draws STL visuals through OBJ copies; see
+    :mod:`drake_abs.diagrams.model_files`)."""
     parser = parser or Parser(plant)
     if any(m.file.startswith("example-robot-data:") for m in scene.models):
         parser.package_map().Add("example-robot-data", str(example_robot_data_dir()))
@@ -91,12 +104,57 @@ def add_scene_models(
             plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.weld, instance))
         for joint in spec.actuate:
             plant.AddJointActuator(f"{joint}_actuator", plant.GetJointByName(joint, instance))
+    add_floating_base_chains(plant)
+
+
+#: The joints of a floating base, parent to child: q = (x, y, z, yaw, pitch, roll) and v their
+#: rates, with the body's pose p = (x, y, z), R = Rz(yaw) Ry(pitch) Rx(roll).
+FLOATING_BASE_JOINTS = (
+    ("x", PrismaticJoint, (1.0, 0.0, 0.0)),
+    ("y", PrismaticJoint, (0.0, 1.0, 0.0)),
+    ("z", PrismaticJoint, (0.0, 0.0, 1.0)),
+    ("yaw", RevoluteJoint, (0.0, 0.0, 1.0)),
+    ("pitch", RevoluteJoint, (0.0, 1.0, 0.0)),
+    ("roll", RevoluteJoint, (1.0, 0.0, 0.0)),
+)
+
+
+def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
+    """Give every free root body of ``plant`` (not finalized) a floating base made of joints:
+    three prismatic and three revolute joints (:data:`FLOATING_BASE_JOINTS`) through massless
+    intermediate bodies, named ``<body>_x`` ... ``<body>_roll``. Its coordinates are positions
+    and Euler angles with ``qdot = v`` (the velocities are the angle rates, not the angular
+    velocity), so rigid-body libraries and the step's Jacobians need no quaternion or
+    angular-velocity map; like any roll-pitch-yaw parametrisation it is singular at
+    pitch = +-pi/2. Returns the names of the bodies given a floating base."""
+    inboard = {int(plant.get_joint(i).child_body().index()) for i in plant.GetJointIndices()}
+    roots = []
+    for k in range(plant.num_model_instances()):
+        instance = ModelInstanceIndex(k)
+        for i in plant.GetBodyIndices(instance):
+            body = plant.get_body(i)
+            if int(i) != int(plant.world_body().index()) and int(i) not in inboard:
+                roots.append(body)
+    for body in roots:
+        parent = plant.world_body()
+        instance = body.model_instance()
+        for j, (name, kind, axis) in enumerate(FLOATING_BASE_JOINTS):
+            last = j == len(FLOATING_BASE_JOINTS) - 1
+            child = (
+                body
+                if last
+                else plant.AddRigidBody(f"{body.name()}_{name}", instance, SpatialInertia.Zero())
+            )
+            plant.AddJoint(
+                kind(f"{body.name()}_{name}", parent.body_frame(), child.body_frame(), axis)
+            )
+            parent = child
+    return [b.name() for b in roots]
 
 
 def build_scene_model(scene: Scene) -> SceneModel:
     """The dynamics plant and contact model of ``scene``."""
     plant = MultibodyPlant(0.0)
-    plant.SetBaseBodyJointType(BaseBodyJointType.kRpyFloatingJoint)
     add_scene_models(plant, scene)
     plant.Finalize()
     contacts = [
@@ -105,9 +163,16 @@ def build_scene_model(scene: Scene) -> SceneModel:
         for p in c.points
     ]
     ground = GroundPlane(scene.ground_normal, scene.ground_height)
-    model = MultibodyContactModel(
-        plant, contacts, ground, scene.time_step, scene.friction_directions
-    )
+    args = (plant, contacts, ground, scene.time_step, scene.friction_directions)
+    if scene.dynamics == "drake":
+        model = MultibodyContactModel(*args)
+    else:
+        try:
+            model = PinocchioContactModel(*args)
+        except NotImplementedError:
+            if scene.dynamics == "pinocchio":
+                raise
+            model = MultibodyContactModel(*args)
     context = plant.CreateDefaultContext()
     q0 = np.asarray(scene.initial_state.get("q", plant.GetPositions(context)), float)
     v0 = np.asarray(scene.initial_state.get("v", plant.GetVelocities(context)), float)

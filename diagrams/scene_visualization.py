@@ -28,7 +28,7 @@ from pydrake.geometry import (
 )
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, BaseBodyJointType
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import DiagramBuilder
 
@@ -84,7 +84,6 @@ def record_rollout_html(
 
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-    plant.SetBaseBodyJointType(BaseBodyJointType.kRpyFloatingJoint)  # as build_scene_model
     add_scene_models(plant, scene, Parser(plant), collisions=False)
     for j, c in enumerate(scene.contacts):
         instance = plant.GetModelInstanceByName(c.model) if c.model else None

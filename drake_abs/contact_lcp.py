@@ -42,8 +42,9 @@ respect to q, v and u come from the caller (e.g. Drake AutoDiffXd).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+import numba as nb
 import numpy as np
 
 from drake_abs.ipm import LCPResult, solve_lcp
@@ -80,6 +81,7 @@ class FrictionCone:
     coefficients: np.ndarray
     directions: int = 4
     regularization: float = 1e-8
+    _frictional: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         coeff = np.asarray(self.coefficients, dtype=float).reshape(-1)
@@ -94,16 +96,17 @@ class FrictionCone:
             )
         object.__setattr__(self, "coefficients", coeff)
         object.__setattr__(self, "directions", int(self.directions))
+        object.__setattr__(self, "_frictional", np.flatnonzero(frictional))
 
     @property
     def frictional(self) -> np.ndarray:
         """Indices of the frictional contacts (nf,)."""
-        return np.flatnonzero(~np.isnan(self.coefficients))
+        return self._frictional
 
     def sizes(self) -> tuple[int, int, int]:
         """``(nc, nt, nf)``: contacts, tangent rows (k per frictional contact), cone rows."""
         nc = self.coefficients.size
-        nf = self.frictional.size
+        nf = self._frictional.size
         return nc, nf * self.directions, nf
 
 
@@ -171,26 +174,70 @@ def assemble_lcp(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The LCP ``(F (B, d, d), z (B, d))`` of one step, and the row scale S (nc + nt,)."""
     nc, nt, nf = cone.sizes()
-    B = quant.v.shape[0]
-    G = np.concatenate([quant.Jn, quant.Jt], axis=1)  # (B, nc + nt, nv)
+    fr = cone.frictional
+    F, z = _assemble(
+        np.ascontiguousarray(quant.W, dtype=float),
+        np.ascontiguousarray(quant.v_free, dtype=float),
+        np.ascontiguousarray(quant.phi, dtype=float),
+        np.ascontiguousarray(quant.Jn, dtype=float),
+        np.ascontiguousarray(quant.Jt, dtype=float),
+        fr,
+        cone.coefficients[fr],
+        cone.directions,
+        float(cone.regularization),
+        float(h),
+    )
     S = np.concatenate([np.full(nc, h), np.ones(nt)])
-    d = nc + nt + nf
-    F = np.zeros((B, d, d))
-    F[:, : nc + nt, : nc + nt] = S[:, None] * (G @ quant.W @ np.swapaxes(G, 1, 2))
-    if nf:
-        k = cone.directions
-        E = np.kron(np.eye(nf), np.ones((k, 1)))  # (nt, nf)
-        F[:, nc : nc + nt, nc + nt :] = E
-        F[:, nc + nt :, nc : nc + nt] = -E.T
-        F[:, nc + nt + np.arange(nf), cone.frictional] = cone.coefficients[cone.frictional]
-        if cone.regularization:
-            rows = nc + np.arange(nt)
-            weight = cone.regularization * F[:, rows, rows].mean(axis=1)
-            F[:, rows, rows] += weight[:, None]
-    z = np.zeros((B, d))
-    z[:, :nc] = quant.phi
-    z[:, : nc + nt] += S * np.einsum("brn,bn->br", G, quant.v_free)
     return F, z, S
+
+
+@nb.njit(cache=True)
+def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h):
+    """Compiled body of :func:`assemble_lcp` (the F and z of the module docstring)."""
+    B, nv = v_free.shape
+    nc = phi.shape[1]
+    nt = Jt.shape[1]
+    nf = fr.shape[0]
+    r = nc + nt
+    d = r + nf
+    F = np.zeros((B, d, d))
+    z = np.zeros((B, d))
+    G = np.empty((r, nv))
+    WG = np.empty((nv, r))
+    for b in range(B):
+        G[:nc] = Jn[b]
+        G[nc:] = Jt[b]
+        for n in range(nv):
+            for j in range(r):
+                acc = 0.0
+                for m in range(nv):
+                    acc += W[b, n, m] * G[j, m]
+                WG[n, j] = acc
+        for i in range(r):
+            scale = h if i < nc else 1.0
+            for j in range(r):
+                acc = 0.0
+                for n in range(nv):
+                    acc += G[i, n] * WG[n, j]
+                F[b, i, j] = scale * acc
+            acc = 0.0
+            for n in range(nv):
+                acc += G[i, n] * v_free[b, n]
+            z[b, i] = scale * acc + (phi[b, i] if i < nc else 0.0)
+        for f in range(nf):
+            for m in range(k):
+                row = nc + f * k + m
+                F[b, row, r + f] = 1.0
+                F[b, r + f, row] = -1.0
+            F[b, r + f, fr[f]] = coeff[f]
+        if reg > 0.0 and nt > 0:
+            mean = 0.0
+            for i in range(nc, r):
+                mean += F[b, i, i]
+            weight = reg * mean / nt
+            for i in range(nc, r):
+                F[b, i, i] += weight
+    return F, z
 
 
 def contact_step(

@@ -57,9 +57,9 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array
-from drake_abs.ipm_kernel import iterate
+from drake_abs.ipm_kernel import iterate, prepare, unscale
 from drake_abs.matrix_class import MatrixClass, classify_matrix
-from drake_abs.sensitivity import implicit_jacobians, jacobi_scale
+from drake_abs.sensitivity import implicit_jacobians
 
 OnBadMatrix = Literal["raise", "regularize", "attempt", "trusted"]
 
@@ -197,17 +197,6 @@ def apply_matrix_policy(
     return F, delta, classes.astype(np.int8)
 
 
-def _gap_atol(Fs: np.ndarray, mu_s: np.ndarray, floor: float) -> np.ndarray:
-    """What double precision resolves of lam_i s_i (scaled units, (B, d)): the exact floor plus
-    roundoff coupled in from the contacts that F couples to contact i, about eps * mu_j."""
-    coupled = (Fs != 0) | (np.swapaxes(Fs, -1, -2) != 0)
-    d = Fs.shape[-1]
-    coupled = coupled & ~np.eye(d, dtype=bool)
-    coupled = np.broadcast_to(coupled, mu_s.shape[:1] + (d, d))
-    neighbour_mu = np.where(coupled, mu_s[:, None, :], 0.0).max(axis=-1)
-    return floor + 1e-13 * neighbour_mu
-
-
 def solve_lcp(
     F,
     q,
@@ -284,23 +273,13 @@ def solve_lcp(
     F, delta, classes = apply_matrix_policy(F, on_bad_matrix, B)
     monotone = (classes == MatrixClass.PSD) | (classes == MatrixClass.P_MATRIX) | (delta > 0)
 
-    # --- scaling (exact powers of two) -------------------------------------------------------
-    D = jacobi_scale(F)  # (d,) or (B, d)
-    Fs = F / (D[..., :, None] * D[..., None, :])
-    qd = Q / D
-    cmax = np.max(np.abs(qd), axis=1)
-    c = np.exp2(np.round(np.log2(np.where(cmax > 0, cmax, 1.0))))
-    qs = qd / c[:, None]
-    floor = exact_tol * exact_tol
-    with np.errstate(over="ignore"):  # c^2 = inf only for unrepresentable problems, flagged below
-        mu_s = np.maximum(mu_full / (c * c)[:, None], floor)
-    gap_scale = mu_s + _gap_atol(Fs, mu_s, floor) / tol
-
-    if warm_start is None:
-        start = np.maximum(1.0, np.sqrt(mu_s.max(axis=1)))[:, None]
-        lam = np.repeat(start, d, axis=1)
-        s = lam.copy()
-    else:
+    # --- scaling (exact powers of two), compiled with the iterations ------------------------
+    shared = F.ndim == 2
+    F3 = np.ascontiguousarray(F[None] if shared else F)
+    D, Fs, qs, c, mu_s, gap_scale, lam, s = prepare(
+        F3, shared, np.ascontiguousarray(Q), np.ascontiguousarray(mu_full), exact_tol, tol
+    )
+    if warm_start is not None:
         lam0 = as_finite_array(warm_start[0], "warm_start[0]")
         s0 = as_finite_array(warm_start[1], "warm_start[1]")
         for name, arr in (("warm_start[0]", lam0), ("warm_start[1]", s0)):
@@ -312,35 +291,20 @@ def solve_lcp(
         lam = lam0 * D / c[:, None]
         s = s0 / (D * c[:, None])
 
-    shared = Fs.ndim == 2
     status, iterations, residual = iterate(
-        np.ascontiguousarray(Fs[None] if shared else Fs),
-        shared,
-        np.ascontiguousarray(qs),
-        np.ascontiguousarray(mu_s),
-        np.ascontiguousarray(gap_scale),
-        lam,
-        s,
-        float(tol),
-        int(max_iterations),
+        Fs, shared, qs, mu_s, gap_scale, lam, s, float(tol), int(max_iterations),
         np.ascontiguousarray(monotone),
-    )
-    with np.errstate(all="ignore"):
-        lam_out = lam * c[:, None] / D
-        s_out = s * c[:, None] * D
-        mu_out = lam_out * s_out
-        mu_target = mu_s * (c * c)[:, None]
-        dlam_dq = dlam_dmu = None
-        if jacobians:
-            dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
-            dlam_dmu = dlam_dmu_pc if mu_form == "per_contact" else dlam_dmu_pc.sum(axis=-1)
+    )  # fmt: skip
     # A solution the scaled iterations found can still over- or underflow in original units
     # (|q| near 1e155, F_ii near 1e-320): such problems are flagged, never passed as valid.
-    outputs = [lam_out, s_out, mu_out, mu_target] + ([dlam_dq, dlam_dmu] if jacobians else [])
-    finite = np.ones(B, dtype=bool)
-    for arr in outputs:
-        finite &= np.all(np.isfinite(arr.reshape(B, -1)), axis=1)
-    finite &= np.all(lam_out > 0, axis=1) & np.all(s_out > 0, axis=1)
+    lam_out, s_out, mu_out, mu_target, finite = unscale(lam, s, mu_s, D, c, shared)
+    dlam_dq = dlam_dmu = None
+    if jacobians:
+        with np.errstate(all="ignore"):
+            dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
+        dlam_dmu = dlam_dmu_pc if mu_form == "per_contact" else dlam_dmu_pc.sum(axis=-1)
+        for arr in (dlam_dq, dlam_dmu):
+            finite &= np.all(np.isfinite(arr.reshape(B, -1)), axis=1)
     status[~finite] = LCPStatus.NUMERICAL_FAILURE
     residual[~finite] = np.inf
     converged = status == LCPStatus.CONVERGED

@@ -4,8 +4,8 @@ problem. It is the only implementation of the iterations; :func:`drake_abs.solve
 scales and calls it, and computes the implicit Jacobians afterwards.
 
 Work arrays are allocated once per call and reused across problems and iterations; the Newton
-matrix is inverted by Gauss-Jordan elimination with partial pivoting for d <= 16 and by LAPACK
-above (pseudo-inverse when it is singular to working precision).
+matrix is factored once per iteration (compiled LU with partial pivoting for d <= 32, LAPACK's
+inverse above) for the predictor and corrector solves (pseudo-inverse steps when it is singular).
 """
 
 from __future__ import annotations
@@ -20,47 +20,65 @@ GAMMA = 1e-3
 #: Step-length backtracking factors (neighbourhood and merit searches).
 BACKTRACK = np.array([1.0, 0.5, 0.25, 0.1, 0.03, 0.01])
 _TINY = np.finfo(np.float64).tiny
-#: Above this size the Newton matrix is inverted by LAPACK, below by the unrolled Gauss-Jordan.
-_LAPACK_FROM = 16
+#: Above this size the Newton matrix is inverted by LAPACK, below factored by the compiled LU.
+_LAPACK_FROM = 32
 
 
 @nb.njit(cache=True)
-def _invert(K, out, aug):
-    """out = K^-1 by Gauss-Jordan with partial pivoting; False when singular."""
+def _lu_factor(K, LU, piv):
+    """LU = K with partial pivoting (Doolittle, in place in LU; row swaps in piv); False when
+    K is singular to working precision or not finite."""
     d = K.shape[0]
     for i in range(d):
         for j in range(d):
-            aug[i, j] = K[i, j]
-            aug[i, d + j] = 1.0 if i == j else 0.0
+            LU[i, j] = K[i, j]
     for c in range(d):
         p = c
-        best = abs(aug[c, c])
+        best = abs(LU[c, c])
         for r in range(c + 1, d):
-            if abs(aug[r, c]) > best:
-                best = abs(aug[r, c])
+            if abs(LU[r, c]) > best:
+                best = abs(LU[r, c])
                 p = r
         if not (best > 0.0) or not np.isfinite(best):
             return False
+        piv[c] = p
         if p != c:
-            for j in range(2 * d):
-                tmp = aug[c, j]
-                aug[c, j] = aug[p, j]
-                aug[p, j] = tmp
-        piv = aug[c, c]
-        for j in range(2 * d):
-            aug[c, j] /= piv
-        for r in range(d):
-            if r != c:
-                f = aug[r, c]
-                if f != 0.0:
-                    for j in range(2 * d):
-                        aug[r, j] -= f * aug[c, j]
-    for i in range(d):
-        for j in range(d):
-            out[i, j] = aug[i, d + j]
-            if not np.isfinite(out[i, j]):
-                return False
+            for j in range(d):
+                tmp = LU[c, j]
+                LU[c, j] = LU[p, j]
+                LU[p, j] = tmp
+        inv = 1.0 / LU[c, c]
+        for r in range(c + 1, d):
+            f = LU[r, c] * inv
+            LU[r, c] = f
+            if f != 0.0:
+                for j in range(c + 1, d):
+                    LU[r, j] -= f * LU[c, j]
     return True
+
+
+@nb.njit(cache=True)
+def _lu_solve(LU, piv, b, out):
+    """out = K^-1 b from the factors of :func:`_lu_factor`."""
+    d = b.shape[0]
+    for i in range(d):
+        out[i] = b[i]
+    for c in range(d):
+        p = piv[c]
+        if p != c:
+            tmp = out[c]
+            out[c] = out[p]
+            out[p] = tmp
+    for i in range(d):
+        acc = out[i]
+        for j in range(i):
+            acc -= LU[i, j] * out[j]
+        out[i] = acc
+    for i in range(d - 1, -1, -1):
+        acc = out[i]
+        for j in range(i + 1, d):
+            acc -= LU[i, j] * out[j]
+        out[i] = acc / LU[i, i]
 
 
 @nb.njit(cache=True)
@@ -128,7 +146,8 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
     residual = np.full(B, np.inf)
     K = np.empty((d, d))
     Kinv = np.empty((d, d))
-    aug = np.empty((d, 2 * d))
+    LU = np.empty((d, d))
+    piv = np.empty(d, dtype=np.int64)
     FL = np.empty(d)
     rp = np.empty(d)
     rs = np.empty(d)
@@ -187,20 +206,25 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
                 for j in range(d):
                     K[i, j] = L[i] * F[i, j] * w[i]
                 K[i, i] += S[i] * w[i]
-            if d > _LAPACK_FROM:  # LAPACK wins for larger matrices
+            if d > _LAPACK_FROM:  # LAPACK's blocked inverse wins for larger matrices
+                factored = False
                 try:
                     Kinv[:, :] = np.linalg.inv(K)
                     inverted = np.all(np.isfinite(Kinv))
                 except Exception:  # singular
                     inverted = False
             else:
-                inverted = _invert(K, Kinv, aug)
-            if not inverted:
+                factored = _lu_factor(K, LU, piv)
+                inverted = factored
+            if not inverted:  # singular to working precision: least-squares steps
                 Kinv[:, :] = np.linalg.pinv(np.where(np.isfinite(K), K, 0.0))
             # predictor (affine scaling): target lam o s = 0
             for i in range(d):
                 rhs[i] = (L[i] * rp[i] - gap[i]) * w[i]
-            _matvec(Kinv, rhs, dl_aff)
+            if factored:
+                _lu_solve(LU, piv, rhs, dl_aff)
+            else:
+                _matvec(Kinv, rhs, dl_aff)
             _matvec(F, dl_aff, ds_aff)
             for i in range(d):
                 ds_aff[i] -= rp[i]
@@ -235,7 +259,10 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
                 target[i] = t
                 corr = dl_aff[i] * ds_aff[i] if (t > ma[i] and use_corr) else 0.0
                 rhs[i] = (L[i] * rp[i] - (gap[i] - t + corr)) * w[i]
-            _matvec(Kinv, rhs, dl)
+            if factored:
+                _lu_solve(LU, piv, rhs, dl)
+            else:
+                _matvec(Kinv, rhs, dl)
             _matvec(F, dl, ds)
             for i in range(d):
                 ds[i] -= rp[i]
@@ -274,3 +301,89 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
                 L[i] += alpha * dl[i]
                 S[i] += alpha * ds[i]
     return status, iterations, residual
+
+
+@nb.njit(cache=True)
+def prepare(F, shared, Q, mu_full, exact_tol, tol):
+    """Scale a batch (step 1 of the :mod:`drake_abs.ipm` docstring) and build the default start.
+
+    ``F`` is (1, d, d) when ``shared`` else (B, d, d); ``Q`` and ``mu_full`` are (B, d) in
+    original units. Returns ``(D, Fs, qs, c, mu_s, gap_scale, lam, s)``: the Jacobi scale D
+    ((1, d) or (B, d), powers of two), the scaled matrices (shape of F), q' = D^-1 q / c, the
+    magnitude scale c (B,), the floored scaled targets, the gap scale of the stopping test (with
+    the exact floor ``exact_tol^2`` plus the roundoff coupled in from the contacts F couples to
+    contact i, about ``1e-13 mu_j``), and
+    the start lam = s = max(1, sqrt(max mu')).
+    """
+    B, d = Q.shape
+    nF = F.shape[0]
+    D = np.empty((nF, d))
+    Fs = np.empty_like(F)
+    for f in range(nF):
+        for i in range(d):
+            a = F[f, i, i]
+            D[f, i] = np.exp2(np.round(0.5 * np.log2(a))) if a > 0.0 else 1.0
+        for i in range(d):
+            for j in range(d):
+                Fs[f, i, j] = F[f, i, j] / (D[f, i] * D[f, j])
+    qs = np.empty((B, d))
+    c = np.empty(B)
+    mu_s = np.empty((B, d))
+    gap_scale = np.empty((B, d))
+    lam = np.empty((B, d))
+    s = np.empty((B, d))
+    floor = exact_tol * exact_tol
+    for b in range(B):
+        f = 0 if shared else b
+        cmax = 0.0
+        for i in range(d):
+            qs[b, i] = Q[b, i] / D[f, i]
+            cmax = max(cmax, abs(qs[b, i]))
+        c[b] = np.exp2(np.round(np.log2(cmax))) if cmax > 0.0 else 1.0
+        c2 = c[b] * c[b]
+        top = 0.0
+        for i in range(d):
+            qs[b, i] /= c[b]
+            mu_s[b, i] = max(mu_full[b, i] / c2, floor)  # c2 = inf: flagged after the solve
+            top = max(top, mu_s[b, i])
+        for i in range(d):
+            neighbour = 0.0
+            for j in range(d):
+                if j != i and (Fs[f, i, j] != 0.0 or Fs[f, j, i] != 0.0):
+                    neighbour = max(neighbour, mu_s[b, j])
+            gap_scale[b, i] = mu_s[b, i] + (floor + 1e-13 * neighbour) / tol
+        start = max(1.0, np.sqrt(top))
+        for i in range(d):
+            lam[b, i] = start
+            s[b, i] = start
+    return D, Fs, qs, c, mu_s, gap_scale, lam, s
+
+
+@nb.njit(cache=True)
+def unscale(lam, s, mu_s, D, c, shared):
+    """Back to original units: ``(lam, s, lam o s, target mu, finite)``, with ``finite`` (B,)
+    False where any of them over- or underflowed (not representable) or lam, s are not > 0."""
+    B, d = lam.shape
+    lam_out = np.empty((B, d))
+    s_out = np.empty((B, d))
+    mu_out = np.empty((B, d))
+    target = np.empty((B, d))
+    finite = np.ones(B, dtype=np.bool_)
+    for b in range(B):
+        f = 0 if shared else b
+        for i in range(d):
+            lam_out[b, i] = lam[b, i] * c[b] / D[f, i]
+            s_out[b, i] = s[b, i] * c[b] * D[f, i]
+            mu_out[b, i] = lam_out[b, i] * s_out[b, i]
+            target[b, i] = mu_s[b, i] * (c[b] * c[b])
+            ok = (
+                np.isfinite(lam_out[b, i])
+                and np.isfinite(s_out[b, i])
+                and np.isfinite(mu_out[b, i])
+                and np.isfinite(target[b, i])
+                and lam_out[b, i] > 0.0
+                and s_out[b, i] > 0.0
+            )
+            if not ok:
+                finite[b] = False
+    return lam_out, s_out, mu_out, target, finite

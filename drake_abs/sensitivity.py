@@ -17,15 +17,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def jacobi_scale(F: np.ndarray) -> np.ndarray:
-    """Positive diagonal scaling D (..., d) with ``D_i ~ sqrt(F_ii)`` rounded to a power of two (so
-    that scaling is exact in floating point); ``D_i = 1`` where ``F_ii <= 0``."""
-    diag = np.diagonal(F, axis1=-2, axis2=-1)
-    with np.errstate(divide="ignore"):
-        expo = np.round(0.5 * np.log2(np.where(diag > 0, diag, 1.0)))
-    return np.exp2(expo)
-
-
 def batched_inverse(M: np.ndarray) -> np.ndarray:
     """Inverse of a stack of square matrices (..., d, d), with closed forms for d = 1 and 2.
 

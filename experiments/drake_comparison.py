@@ -15,10 +15,11 @@ scene's declared contact points, hard contact) under Exact, BS (``Fixed`` mu) an
   ``h sum_k max(0, v0 - a h k)``, with ``a = mu g - u / m``. Every model first settles at rest
   from the touching pose (``settle_duration``), so the push starts from each model's own rest
   state.
-- **ball**: the 0.2 kg, 5 cm ball of ``ball.sdf`` (free body, roll-pitch-yaw floating joint in
-  both plants), dropped with its centre at ``ball_height`` and thrown horizontally at
-  ``ball_speed`` along +y (it then rolls about x: the roll angle has no singularity, whereas
-  rolling about y would drive pitch through the joint's singularity at pi/2). Drake's twin has
+- **ball**: the 0.2 kg, 5 cm ball of ``ball.sdf`` (free body; the same floating base of joints,
+  q = (x, y, z, yaw, pitch, roll), in both plants), dropped with its centre at ``ball_height``
+  and thrown horizontally at ``ball_speed`` along +y (it then rolls about x: the roll angle has
+  no singularity, whereas rolling about y would drive pitch through the singularity at pi/2).
+  Drake's twin has
   a collision sphere of the ball's radius at its centre. The ball has no actuator: its "u" is
   the initial speed (a column of d x_T / d x_0).
 
@@ -176,11 +177,7 @@ def build_drake_model(
     )
     from pydrake.math import RigidTransform
     from pydrake.multibody.parsing import Parser
-    from pydrake.multibody.plant import (
-        AddMultibodyPlant,
-        BaseBodyJointType,
-        MultibodyPlantConfig,
-    )
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.framework import DiagramBuilder
 
     from drake_abs.diagrams.scene_builder import PACKAGE_DIR
@@ -217,7 +214,6 @@ def build_drake_model(
         ),
         builder,
     )
-    plant.SetBaseBodyJointType(BaseBodyJointType.kRpyFloatingJoint)  # as our scene builder
     Parser(plant).AddModels(str(PACKAGE_DIR / "models" / "box_planar.sdf"))
     body = plant.GetBodyByName(scene)
     material = _material(config)
@@ -316,8 +312,8 @@ def our_scene(scene: str, time_step: float, config: ComparisonConfig, policy: st
             "contacts": [{"body": "ball", "points": [[0.0, 0.0, 0.0]], "radius": BALL_RADIUS,
                           "friction": config.friction}],
             "friction_directions": 4,
-            "initial_state": {"q": [0.0, 0.0, 0.0, 0.0, 0.0, config.ball_height],
-                              "v": [0.0, 0.0, 0.0, 0.0, config.ball_speed, 0.0]},
+            "initial_state": {"q": [0.0, 0.0, config.ball_height, 0.0, 0.0, 0.0],
+                              "v": [0.0, config.ball_speed, 0.0, 0.0, 0.0, 0.0]},
         }  # fmt: skip
     else:
         raise ValueError(f"scene must be 'box' or 'ball'; got {scene!r}")
@@ -412,18 +408,19 @@ def box_metrics(xs: np.ndarray, x0: np.ndarray, analytic: dict) -> dict:
 
 
 def ball_metrics(xs: np.ndarray) -> dict:
-    phi = xs[:, 5] - BALL_RADIUS
-    vz = xs[:, 11]
+    # x = (x, y, z, yaw, pitch, roll, their rates); rolling about x: only roll turns
+    phi = xs[:, 2] - BALL_RADIUS
+    vz = xs[:, 8]
     going_up = np.flatnonzero((vz[1:] >= 0) & (vz[:-1] < 0))  # the first impact step
     impact = int(going_up[0]) + 1 if going_up.size else len(xs) - 1
-    vy, wx = xs[-1, 10], xs[-1, 6]
+    vy, wx = xs[-1, 7], xs[-1, 11]
     return {
         "max_penetration_m": float(max(0.0, -phi.min())),
         "impact_step": impact,
         "rebound_height_m": float(phi[impact:].max()),
         "rest_height_m": float(phi[-1]),
         "final": {
-            "y_m": float(xs[-1, 4]),
+            "y_m": float(xs[-1, 1]),
             "vy_mps": float(vy),
             "vz_mps": float(vz[-1]),
             "roll_rate_radps": float(wx),
@@ -467,8 +464,8 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
 KEY_ENTRIES = {
     "box": [("dx_T/dvx_0", 0, 3), ("dx_T/du", 0, 6), ("dvx_T/dvx_0", 3, 3),
             ("dx_T/dz_0", 0, 1), ("dz_T/dz_0", 1, 1), ("dpitch_T/dvx_0", 2, 3)],
-    "ball": [("dy_T/dvy_0", 4, 10), ("dvy_T/dvy_0", 10, 10), ("dy_T/dz_0", 4, 5),
-             ("dz_T/dz_0", 5, 5), ("droll_T/dvy_0", 0, 10)],
+    "ball": [("dy_T/dvy_0", 1, 7), ("dvy_T/dvy_0", 7, 7), ("dy_T/dz_0", 1, 2),
+             ("dz_T/dz_0", 2, 2), ("droll_T/dvy_0", 5, 7)],
 }  # fmt: skip
 
 
@@ -482,7 +479,7 @@ def _scene_setup(scene: str, config: ComparisonConfig):
         x0 = np.array([0.0, BOX_HALF[1], 0.0, config.box_speed, 0.0, 0.0])
         return x0, np.array([config.box_push]), config.box_duration, True
     x0 = np.zeros(12)
-    x0[5], x0[10] = config.ball_height, config.ball_speed
+    x0[2], x0[7] = config.ball_height, config.ball_speed
     return x0, np.zeros(0), config.ball_duration, False
 
 
@@ -501,7 +498,7 @@ def _steps(duration: float, h: float) -> int:
 
 
 # the slope checked against finite differences: (name, row of x_T, entry of x_0)
-SLOPE = {"box": ("dx_T/dvx_0", 0, 3), "ball": ("dy_T/dvy_0", 4, 10)}
+SLOPE = {"box": ("dx_T/dvx_0", 0, 3), "ball": ("dy_T/dvy_0", 1, 7)}
 
 
 def simulate_scene(scene: str, h: float, config: ComparisonConfig, *, gradients: bool,
@@ -554,7 +551,7 @@ def simulate_scene(scene: str, h: float, config: ComparisonConfig, *, gradients:
             entry.update(dx_dx0=g["dx_dx0"], dx_du=g["dx_du"],
                          gradient_seconds_per_step=g["seconds"])  # fmt: skip
             if scene == "ball":  # u: the initial speed along y
-                entry["dx_du"] = entry["dx_dx0"][:, 10:11].copy()
+                entry["dx_du"] = entry["dx_dx0"][:, 7:8].copy()
 
             def final(delta, x0=x0, roll=roll):
                 x = x0.copy()
@@ -900,8 +897,8 @@ def _plot_trajectories(path: Path, runs: dict) -> Path:
             tt = h * np.arange(len(m["xs"]))
             kw = {"color": _color(k), "ls": style, "lw": 1.4}
             lab = f"{_PRETTY[k]} h={h:g}"
-            axes[1, 0].plot(tt, 1e3 * (m["xs"][:, 5] - BALL_RADIUS), label=lab, **kw)
-            axes[1, 1].plot(tt, m["xs"][:, 10], label=lab, **kw)
+            axes[1, 0].plot(tt, 1e3 * (m["xs"][:, 2] - BALL_RADIUS), label=lab, **kw)
+            axes[1, 1].plot(tt, m["xs"][:, 7], label=lab, **kw)
     a = runs["box"]["coarse"]["analytic"]
     if a["continuous_m"] is not None:
         axes[0, 0].axhline(a["continuous_m"], color="gray", ls="--", lw=1, label="continuous")

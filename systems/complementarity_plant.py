@@ -19,7 +19,7 @@ from drake_abs.contact_lcp import contact_step
 from drake_abs.lcs import GradientMode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 from drake_abs.systems import autodiff
-from drake_abs.systems.multibody_quantities import MultibodyContactModel
+from drake_abs.systems.multibody_quantities import ContactModelBase
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ class ComplementarityStepper:
 
     def __init__(
         self,
-        model: MultibodyContactModel,
+        model: ContactModelBase,
         smoothing: SmoothingPolicy | None = None,
         gradient: GradientMode = "frozen",
         activation_distance: float = float("inf"),
@@ -114,7 +114,10 @@ class ComplementarityStepper:
                 dn_dx=np.zeros((B, nc, nq + nv)),
                 dn_du=np.zeros((B, nc, nu)),
             )
-        masks, group = np.unique(active, axis=0, return_inverse=True)
+        if B == 1:
+            masks, group = active, np.zeros(1, dtype=np.int64)
+        else:  # states with the same active set share one batched LCP
+            masks, group = np.unique(active, axis=0, return_inverse=True)
         for g, mask in enumerate(masks):
             rows = np.flatnonzero(group.ravel() == g)
             idx = np.flatnonzero(mask)

@@ -62,9 +62,9 @@ def _split(arr: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
     return value, grad.reshape(arr.shape + (P,))
 
 
-class MultibodyContactModel:
-    """Evaluates :class:`~drake_abs.contact_lcp.StepQuantities` for a finalized continuous
-    MultibodyPlant (double) and a list of point contacts against one ground plane.
+class ContactModelBase:
+    """What every provider of step quantities shares: the plant's sizes and actuation matrix,
+    the contact candidates, the ground, h and the friction cone.
 
     Args:
         plant: a finalized MultibodyPlant (time_step 0: the step is ours), double.
@@ -87,8 +87,6 @@ class MultibodyContactModel:
         if not contacts:
             raise ValueError("contacts must list at least one PointContact")
         self.plant = plant
-        self.plant_ad = plant.ToAutoDiffXd()
-        self.context_ad = self.plant_ad.CreateDefaultContext()
         self.contacts = list(contacts)
         self.ground = ground
         self.h = float(time_step)
@@ -96,33 +94,88 @@ class MultibodyContactModel:
         friction = [np.nan if c.friction is None else c.friction for c in contacts]
         self.cone = FrictionCone(np.array(friction), directions)
         self.tangents = tangent_directions(self.normal, self.cone.directions)
+        self._cones: dict[tuple[int, ...], FrictionCone] = {}
         self.B_act = plant.MakeActuationMatrix()
         self.nq, self.nv, self.nu = (
             plant.num_positions(),
             plant.num_velocities(),
             plant.num_actuators(),
         )
-        self._bodies = []
+        self._bodies_d = []
         for c in contacts:
-            instance = (
-                self.plant_ad.GetModelInstanceByName(c.model_instance) if c.model_instance else None
-            )
+            instance = plant.GetModelInstanceByName(c.model_instance) if c.model_instance else None
             body = (
-                self.plant_ad.GetBodyByName(c.body, instance)
+                plant.GetBodyByName(c.body, instance)
                 if instance is not None
-                else self.plant_ad.GetBodyByName(c.body)
+                else plant.GetBodyByName(c.body)
             )
-            self._bodies.append(body)
+            self._bodies_d.append(body)
+
+    def cone_for(self, active: np.ndarray) -> FrictionCone:
+        """The friction cone of a subset of the contacts (indices)."""
+        key = tuple(int(i) for i in active)
+        cone = self._cones.get(key)
+        if cone is None:
+            cone = FrictionCone(self.cone.coefficients[list(key)], self.cone.directions)
+            self._cones[key] = cone
+        return cone
+
+    def quantities(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        u: np.ndarray,
+        active: np.ndarray | None = None,
+        *,
+        derivatives: bool = True,
+    ) -> StepQuantities:
+        """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
+        (indices; all by default), with derivatives with respect to p = (q, v, u) unless
+        ``derivatives=False``."""
+        active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
+        per_state = [
+            self._one(qb, vb, ub, active, derivatives) for qb, vb, ub in zip(q, v, u, strict=True)
+        ]
+        if len(per_state) == 1:
+            fields = {k: np.asarray(x)[None] for k, x in per_state[0].items()}
+        else:
+            fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
+        return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
+
+    def _one(self, q, v, u, active, derivatives: bool) -> dict:
+        """The quantities of one state (the fields of StepQuantities but q and v)."""
+        raise NotImplementedError
+
+    def distances(self, q: np.ndarray) -> np.ndarray:
+        """Signed distances (B, nc) in m of every contact candidate, in double."""
+        raise NotImplementedError
+
+
+class MultibodyContactModel(ContactModelBase):
+    """Evaluates :class:`~drake_abs.contact_lcp.StepQuantities` for a finalized continuous
+    MultibodyPlant (double) and a list of point contacts against one ground plane, through the
+    plant itself (AutoDiffXd for derivatives). Any joint type. Arguments as
+    :class:`ContactModelBase`.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        contacts: list[PointContact],
+        ground: GroundPlane,
+        time_step: float,
+        directions: int = 4,
+    ):
+        super().__init__(plant, contacts, ground, time_step, directions)
+        self.plant_ad = plant.ToAutoDiffXd()
+        self.context_ad = self.plant_ad.CreateDefaultContext()
+        self._bodies = [self.plant_ad.get_body(b.index()) for b in self._bodies_d]
         self._context = plant.CreateDefaultContext()
-        self._bodies_d = [plant.get_body(b.index()) for b in self._bodies]
+        self._qdot_is_v = bool(plant.IsVelocityEqualToQDot())
         self._unit_v_d = list(np.eye(self.nv))
         self._unit_v = [
             np.array([AutoDiffXd(float(i == j)) for i in range(self.nv)]) for j in range(self.nv)
         ]
-
-    def cone_for(self, active: np.ndarray) -> FrictionCone:
-        """The friction cone of a subset of the contacts (indices)."""
-        return FrictionCone(self.cone.coefficients[active], self.cone.directions)
 
     def distances(self, q: np.ndarray) -> np.ndarray:
         """Signed distances (B, nc) in m of every contact candidate, in double."""
@@ -135,24 +188,6 @@ class MultibodyContactModel:
                 out[b, i] = self.normal @ p_WC - contact.radius - self.ground.height
         return out
 
-    def quantities(
-        self,
-        q: np.ndarray,
-        v: np.ndarray,
-        u: np.ndarray,
-        active: np.ndarray | None = None,
-        *,
-        derivatives: bool = True,
-    ) -> StepQuantities:
-        """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
-        (indices; all by default), with derivatives unless ``derivatives=False``."""
-        active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
-        per_state = [
-            self._one(qb, vb, ub, active, derivatives) for qb, vb, ub in zip(q, v, u, strict=True)
-        ]
-        fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
-        return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
-
     def _evaluate(self, plant, ctx, q, v, u, active, unit_v) -> dict:
         """M, tau, N, phi, Jn, Jt of one state, in the plant's scalar type (double, or
         AutoDiffXd seeded on p = (q, v, u)): one code path for values and derivatives."""
@@ -163,7 +198,10 @@ class MultibodyContactModel:
         out["tau"] = (
             self.B_act @ u + plant.CalcGravityGeneralizedForces(ctx) - plant.CalcBiasTerm(ctx)
         )
-        out["N"] = np.stack([plant.MapVelocityToQDot(ctx, e) for e in unit_v], axis=1)
+        if self._qdot_is_v:  # N = I (prismatic, revolute, planar chains); dN = 0
+            out["N"] = np.eye(self.nq, dtype=object if plant is self.plant_ad else float)
+        else:
+            out["N"] = np.stack([plant.MapVelocityToQDot(ctx, e) for e in unit_v], axis=1)
         phi, Jn, Jt = [], [], []
         world = plant.world_frame()
         for i in active:
@@ -172,8 +210,10 @@ class MultibodyContactModel:
             X_WB = plant.EvalBodyPoseInWorld(ctx, body)
             p_WC = X_WB.multiply(np.asarray(contact.p_BC, float))
             phi.append(self.normal @ p_WC - contact.radius - self.ground.height)
-            p_WQ = p_WC - contact.radius * self.normal  # the witness point on the body
-            p_BQ = X_WB.inverse().multiply(p_WQ)
+            # the witness point on the body: p_BC moved by the radius against the normal
+            p_BQ = np.asarray(contact.p_BC, float) - contact.radius * (
+                X_WB.rotation().inverse().multiply(self.normal)
+            )
             J = plant.CalcJacobianTranslationalVelocity(
                 ctx, JacobianWrtVariable.kV, body.body_frame(), p_BQ, world, world
             )
@@ -206,7 +246,7 @@ class MultibodyContactModel:
         Jn, dJn = _split(e["Jn"], P)
         Jt, dJt = _split(e["Jt"], P) if e["Jt"].size else (np.zeros((0, nv)), np.zeros((0, nv, P)))
         W = np.linalg.inv(M)
-        dW = -np.einsum("ij,jkp,kl->ilp", W, dM, W)
+        dW = -np.moveaxis(W @ np.moveaxis(dM, -1, 0) @ W, 0, -1)  # d(M^-1) = -W dM W
         dv_free = np.zeros((nv, P))
         dv_free[:, nq : nq + nv] = np.eye(nv)
         dv_free += h * (np.einsum("ijp,j->ip", dW, tau) + W @ dtau)

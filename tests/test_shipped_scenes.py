@@ -63,7 +63,8 @@ def test_every_shipped_scene_loads_and_builds():
 def test_solo12_is_the_floating_example_robot_data_robot_with_twelve_actuators():
     plant = scene_model("solo12_drop").plant
     names = plant.GetPositionNames()
-    assert names[:6] == [f"solo_base_link_{c}" for c in ("qx", "qy", "qz", "x", "y", "z")]
+    base = ["x_x", "y_x", "z_x", "yaw_q", "pitch_q", "roll_q"]  # the floating base's joints
+    assert names[:6] == [f"solo_base_link_{c}" for c in base]
     legs = [f"{leg}_{j}" for leg in ("FL", "FR", "HL", "HR") for j in ("HAA", "HFE", "KFE")]
     assert names[6:] == [f"solo_{j}_q" for j in legs]
     actuated = [plant.get_joint_actuator(a).joint().name() for a in plant.GetJointActuatorIndices()]
@@ -160,12 +161,12 @@ def test_ball_lands_and_rolls_at_five_sevenths_of_its_speed():
     v_y = -r w_x, about the x axis only."""
     xs, impulses, _ = rollout("ball_throw")
     r = 0.05
-    q, v = xs[-1, :6], xs[-1, 6:]
+    q, v = xs[-1, :6], xs[-1, 6:]  # q = (x, y, z, yaw, pitch, roll), v = their rates
     assert impulses[:25].max() < 1e-12 and impulses[-1, 0] > 1e-3  # flies, then on the ground
-    assert q[5] == pytest.approx(r, abs=1e-9) and abs(v[5]) < 1e-9
-    assert v[4] == pytest.approx(5 / 7, abs=1e-9)
-    assert v[4] + r * v[0] == pytest.approx(0, abs=1e-9)  # rolling: the contact point is still
-    np.testing.assert_allclose([q[1], q[2], q[3], v[1], v[2], v[3]], 0, atol=1e-12)
+    assert q[2] == pytest.approx(r, abs=1e-9) and abs(v[2]) < 1e-9
+    assert v[1] == pytest.approx(5 / 7, abs=1e-9)
+    assert v[1] + r * v[5] == pytest.approx(0, abs=1e-9)  # rolling: the contact point is still
+    np.testing.assert_allclose([q[0], q[3], q[4], v[0], v[3], v[4]], 0, atol=1e-12)
 
 
 def test_pushed_box_decelerates_as_discrete_coulomb_and_stays_stuck():
@@ -206,8 +207,8 @@ def test_solo12_lands_on_four_feet_and_stands():
     q, v = xs[-1, :18], xs[-1, 18:]
     assert impulses[:15].max() < 1e-12  # falls freely at first
     assert impulses[-20:].min() > 1e-3  # then stands on all four feet
-    assert 0.22 < q[5] < 0.26
-    np.testing.assert_allclose(q[:5], 0, atol=1e-3)  # level, not drifting
+    assert 0.22 < q[2] < 0.26
+    np.testing.assert_allclose(q[[0, 1, 3, 4, 5]], 0, atol=1e-3)  # level, not drifting
     assert np.abs(v[:6]).max() < 0.05
     assert impulses[-1].sum() == pytest.approx(2.5 * G * 0.005, rel=0.1)
 
@@ -225,10 +226,10 @@ def _solo_state():
     -0.3) m/s: HR slides, the others are near, so contact-aware smoothing acts."""
     sm = scene_model("solo12_drop")
     q = sm.q0.copy()
-    q[0], q[1] = 0.02, -0.01
-    q[5] -= sm.contact_model.distances(q[None]).min() - 5e-4
+    q[5], q[4] = 0.02, -0.01  # roll, pitch
+    q[2] -= sm.contact_model.distances(q[None]).min() - 5e-4
     v = np.zeros(18)
-    v[3:6] = [1.0, 0.3, -0.3]
+    v[0:3] = [1.0, 0.3, -0.3]
     return _x(q, v)
 
 
@@ -251,8 +252,9 @@ def _half_cheetah_state():
 FD_STATES = {
     "ball_throw": {
         # landing at 0.3 m/s while moving at 1 m/s: too little normal impulse to stop the slip
-        "contact": lambda: (_x([0, 0, 0, 0, 0, 0.0505], [0, 0, 0, 0, 1.0, -0.3]), np.zeros(0)),
-        "approach": lambda: (_x([0, 0, 0, 0, 0, 0.06], [2.0, 0, 0, 0, 1.0, -0.5]), np.zeros(0)),
+        # (x = (x, y, z, yaw, pitch, roll) and their rates)
+        "contact": lambda: (_x([0, 0, 0.0505, 0, 0, 0], [0, 1.0, -0.3, 0, 0, 0]), np.zeros(0)),
+        "approach": lambda: (_x([0, 0, 0.06, 0, 0, 0], [0, 1.0, -0.5, 0, 0, 2.0]), np.zeros(0)),
     },
     "box_push": {
         # tilted 0.1 rad, landing on its right corner (the left one 4 cm up), sliding

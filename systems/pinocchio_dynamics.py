@@ -1,0 +1,276 @@
+"""A Drake MultibodyPlant's rigid-body dynamics evaluated by pinocchio, with analytic derivatives:
+the fast provider of :class:`~drake_abs.contact_lcp.StepQuantities` for the complementarity step.
+
+:func:`pinocchio_model_from_plant` copies a finalized MultibodyPlant (masses, inertias, joint
+frames, gravity) into a ``pinocchio.Model`` with the same generalized coordinates: every Drake
+joint with degrees of freedom must be a RevoluteJoint or a PrismaticJoint (welds are merged into
+their parent). Then ``qdot = v`` (N = I) and pinocchio's derivatives with respect to q are the
+ones the step needs. Scenes with a free root body get a floating base made of such joints (see
+:func:`drake_abs.diagrams.scene_builder.add_floating_base_chains`).
+
+:class:`PinocchioContactModel` has the interface of
+:class:`~drake_abs.systems.multibody_quantities.MultibodyContactModel` and gives the same numbers
+(a test checks every quantity and derivative against it), in a fraction of the time:
+
+- values: ``computeMinverse`` (W), ``aba`` (v_free = v + h aba(q, v, B u), gravity and bias
+  included), ``computeJointJacobians`` (points and their Jacobians);
+- derivatives: ``computeABADerivatives`` (dv_free), one ``computeRNEADerivatives`` per velocity
+  at zero velocity and gravity (``dM(q) a`` for the columns ``a = W e_j``, so
+  ``dW e_j = -W dM W e_j``), and dJ/dq in closed form from the joint Jacobians (see
+  ``_contacts``).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+import pinocchio as pin
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import PrismaticJoint, RevoluteJoint, WeldJoint
+
+from drake_abs.systems.multibody_quantities import ContactModelBase, GroundPlane, PointContact
+
+
+def _se3(X) -> pin.SE3:
+    """A Drake RigidTransform as a pinocchio SE3."""
+    return pin.SE3(np.asarray(X.rotation().matrix()), np.asarray(X.translation()))
+
+
+def pinocchio_model_from_plant(plant: MultibodyPlant) -> tuple[pin.Model, dict]:
+    """The pinocchio model of a finalized (continuous or discrete) MultibodyPlant, and a map from
+    each Drake body index to ``(pinocchio joint id, X_JB)``: the body frame's pose in the frame of
+    the pinocchio joint that carries it (world: joint 0).
+
+    Raises:
+        NotImplementedError: for a joint type other than revolute, prismatic or weld.
+    """
+    if not plant.is_finalized():
+        raise ValueError("plant must be finalized")
+    context = plant.CreateDefaultContext()
+    model = pin.Model()
+    model.gravity = pin.Motion(
+        np.concatenate([plant.gravity_field().gravity_vector(), np.zeros(3)])
+    )
+    carried = {int(plant.world_body().index()): (0, pin.SE3.Identity())}
+    joints = [plant.get_joint(i) for i in plant.GetJointIndices()]
+    for joint in joints:
+        if not isinstance(joint, RevoluteJoint | PrismaticJoint | WeldJoint):
+            raise NotImplementedError(
+                f"joint {joint.name()!r} is a {type(joint).__name__}; the pinocchio dynamics "
+                "support revolute, prismatic and weld joints (build floating bases as joint "
+                "chains; or use the Drake dynamics)"
+            )
+    pending = sorted(joints, key=lambda j: (j.num_velocities() > 0, j.velocity_start()))
+
+    def attach(joint) -> None:
+        parent_id, X_JP = carried[int(joint.parent_body().index())]
+        X_PF = _se3(joint.frame_on_parent().GetFixedPoseInBodyFrame())
+        X_CM = _se3(joint.frame_on_child().GetFixedPoseInBodyFrame())
+        X_JF = X_JP * X_PF
+        child = joint.child_body()
+        if isinstance(joint, WeldJoint):
+            carried[int(child.index())] = (parent_id, X_JF * _se3(joint.X_FM()) * X_CM.inverse())
+            jid, X_JC = carried[int(child.index())]
+        else:
+            axis = np.asarray(
+                joint.revolute_axis()
+                if isinstance(joint, RevoluteJoint)
+                else joint.translation_axis(),
+                float,
+            )
+            kind = (
+                pin.JointModelRevoluteUnaligned
+                if isinstance(joint, RevoluteJoint)
+                else pin.JointModelPrismaticUnaligned
+            )
+            jid = model.addJoint(parent_id, kind(axis), X_JF, joint.name())
+            X_JC = X_CM.inverse()
+            carried[int(child.index())] = (jid, X_JC)
+        M = child.CalcSpatialInertiaInBodyFrame(context)
+        mass = float(M.get_mass())
+        if mass > 0:
+            com = np.asarray(M.get_com())
+            I_com = M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3()
+            model.appendBodyToJoint(jid, pin.Inertia(mass, com, I_com), X_JC)
+
+    while pending:  # parents first; welds as soon as their parent is placed
+        ready = [j for j in pending if int(j.parent_body().index()) in carried]
+        if not ready:
+            raise ValueError("the plant's joints do not form a tree rooted at the world")
+        joint = ready[0]
+        if joint.num_velocities() and any(w.num_velocities() == 0 for w in ready):
+            joint = next(w for w in ready if w.num_velocities() == 0)
+        attach(joint)
+        pending.remove(joint)
+    for joint in joints:
+        if joint.num_velocities():
+            pj = model.joints[model.getJointId(joint.name())]
+            if (pj.idx_q, pj.idx_v) != (joint.position_start(), joint.velocity_start()):
+                raise ValueError(
+                    f"joint {joint.name()!r}: pinocchio coordinate {pj.idx_q} differs from "
+                    f"Drake's {joint.position_start()} (joint names must be unique)"
+                )
+    return model, carried
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+class PinocchioContactModel(ContactModelBase):
+    """Step quantities of a MultibodyPlant (revolute and prismatic joints) with point contacts
+    against one ground plane, evaluated by pinocchio. Arguments as
+    :class:`~drake_abs.systems.multibody_quantities.MultibodyContactModel`."""
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        contacts: list[PointContact],
+        ground: GroundPlane,
+        time_step: float,
+        directions: int = 4,
+    ):
+        super().__init__(plant, contacts, ground, time_step, directions)
+        self._eye = np.eye(self.nq)
+        self.pin_model, carried = pinocchio_model_from_plant(plant)
+        self.pin_data = self.pin_model.createData()
+        free = self.pin_model.copy()
+        free.gravity = pin.Motion.Zero()
+        self._free_model, self._free_data = free, free.createData()
+        self._points = []  # (pinocchio joint id, p_J: the contact point in that joint's frame)
+        for body in self._bodies_d:
+            jid, X_JB = carried[int(body.index())]
+            self._points.append((jid, X_JB))
+        self._points = [
+            (jid, X_JB.act(np.asarray(c.p_BC, float)))
+            for (jid, X_JB), c in zip(self._points, self.contacts, strict=True)
+        ]
+        # velocity indices of the joints on each joint's path from the world, root first
+        m = self.pin_model
+        self._paths = {
+            jid: np.array([m.joints[i].idx_v for i in m.supports[jid] if i > 0], dtype=np.int64)
+            for jid, _ in self._points
+        }
+
+    def distances(self, q: np.ndarray) -> np.ndarray:
+        model, data = self.pin_model, self.pin_data
+        out = np.empty((len(q), len(self.contacts)))
+        for b, qb in enumerate(q):
+            pin.forwardKinematics(model, data, qb)
+            for i, ((jid, p_J), c) in enumerate(zip(self._points, self.contacts, strict=True)):
+                p_W = data.oMi[jid].act(p_J)
+                out[b, i] = self.normal @ p_W - c.radius - self.ground.height
+        return out
+
+    def _contacts(self, q, active, derivatives: bool):
+        """phi (na,), Jn (na, nv), Jt (nt, nv) and, with derivatives, dphi/dq (na, nq) and
+        dJn/dq, dJt/dq (rows, nv, nq) for the active contacts, from the joint Jacobians of the
+        last ``computeJointJacobians``.
+
+        With the joints' world-frame (spatial) Jacobian columns ``S_j = (v_j, w_j)``, a point p
+        fixed on the body moves with ``J_p = Jv - [p]x Jw``; for 1-dof joints
+        ``dS_j/dq_k = S_k x S_j`` (motion cross product) when joint k precedes j on the body's
+        path from the world, else 0; and ``dp/dq_k`` is column k of J_p. The witness point
+        ``Q = C - radius n`` moves with the contact centre C.
+        """
+        model, data = self.pin_model, self.pin_data
+        nv = self.nv
+        n = self.normal
+        phi, Jn, Jt, dphi, dJn, dJt = [], [], [], [], [], []
+        for i in active:
+            jid, p_J = self._points[i]
+            c = self.contacts[i]
+            C_W = data.oMi[jid].act(p_J)
+            Q_W = C_W - c.radius * n
+            S = pin.getJointJacobian(model, data, jid, pin.WORLD)
+            Jv, Jw = S[:3], S[3:]
+            J_Q = Jv - _skew(Q_W) @ Jw
+            phi.append(n @ C_W - c.radius - self.ground.height)
+            Jn.append(n @ J_Q)
+            rows = [n] + (list(self.tangents) if c.friction is not None else [])
+            if c.friction is not None:
+                Jt.extend(self.tangents @ J_Q)
+            if derivatives:
+                J_C = Jv - _skew(C_W) @ Jw
+                dphi.append(n @ J_C)
+                dJ_Q = _point_jacobian_derivative(Jv, Jw, self._paths[jid], J_C, Q_W)
+                dJ_rows = np.tensordot(np.array(rows), dJ_Q, axes=1)  # (rows, nv, nq)
+                dJn.append(dJ_rows[0])
+                dJt.extend(dJ_rows[1:])
+        na = len(active)
+        out = {
+            "phi": np.array(phi).reshape(na),
+            "Jn": np.array(Jn).reshape(na, nv),
+            "Jt": np.array(Jt).reshape(len(Jt), nv),
+        }
+        if derivatives:
+            out["dphi"] = np.array(dphi).reshape(na, self.nq)
+            out["dJn"] = np.array(dJn).reshape(na, nv, self.nq)
+            out["dJt"] = np.array(dJt).reshape(len(dJt), nv, self.nq)
+        return out
+
+    def _one(self, q, v, u, active, derivatives: bool) -> dict:
+        model, data = self.pin_model, self.pin_data
+        nq, nv, nu = self.nq, self.nv, self.nu
+        h = self.h
+        q = np.asarray(q, float)
+        v = np.asarray(v, float)
+        tau = self.B_act @ np.asarray(u, float)
+        if not derivatives:
+            a = pin.aba(model, data, q, v, tau)
+            W = pin.computeMinverse(model, data, q)
+            W = np.triu(W) + np.triu(W, 1).T
+            pin.computeJointJacobians(model, data, q)
+            out = self._contacts(q, active, False)
+            return dict(W=W, v_free=v + h * a, N=self._eye, **out)
+        da_dq, da_dv, W = pin.computeABADerivatives(model, data, q, v, tau)
+        W = np.triu(W) + np.triu(W, 1).T
+        a = data.ddq.copy()
+        P = nq + nv + nu
+        dv_free = np.zeros((nv, P))
+        dv_free[:, :nq] = h * da_dq
+        dv_free[:, nq : nq + nv] = np.eye(nv) + h * da_dv
+        dv_free[:, nq + nv :] = h * W @ self.B_act
+        dW = np.zeros((nv, nv, P))
+        fm, fd = self._free_model, self._free_data
+        zero = np.zeros(nv)
+        for j in range(nv):  # dM(q) a for a = W e_j, at zero velocity and gravity
+            dtau_dq = pin.computeRNEADerivatives(fm, fd, q, zero, W[:, j])[0]
+            dW[:, j, :nq] = -W @ dtau_dq
+        pin.computeJointJacobians(model, data, q)
+        c = self._contacts(q, active, True)
+
+        def widen(d):  # (..., nq) -> (..., P): only q-columns are non-zero
+            out = np.zeros(d.shape[:-1] + (P,))
+            out[..., :nq] = d
+            return out
+
+        return dict(
+            W=W, v_free=v + h * a, N=self._eye, phi=c["phi"], Jn=c["Jn"], Jt=c["Jt"],
+            dW=dW, dv_free=dv_free, dphi=widen(c["dphi"]), dJn=widen(c["dJn"]),
+            dJt=widen(c["dJt"]), dN=np.zeros((nq, nv, P)),
+        )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _point_jacobian_derivative(Jv, Jw, path, J_C, Q):
+    """d J_Q / d q (3, nv, nq) of ``J_Q = Jv - [Q]x Jw`` for the point Q = C - r n, from the
+    body joint's world-frame Jacobian (Jv, Jw (3, nv)), the velocity indices on its path from
+    the world (root first), the Jacobian J_C of the body-fixed point C and Q's world position.
+
+    ``dS_j/dq_k = S_k x S_j`` for k before j on the path (1-dof joints), so
+    ``dJv_j/dq_k = w_k x v_j + v_k x w_j`` and ``dJw_j/dq_k = w_k x w_j``; then
+    ``dJ_Q[:, j, k] = dJv_j/dq_k - Q x dJw_j/dq_k - (J_C[:, k]) x Jw[:, j]``.
+    """
+    nv = Jv.shape[1]
+    out = np.zeros((3, nv, nv))
+    for a in range(path.shape[0]):
+        k = path[a]
+        for b in range(path.shape[0]):
+            j = path[b]
+            dv = np.zeros(3)
+            if b > a:
+                wk, vk, vj, wj = Jw[:, k], Jv[:, k], Jv[:, j], Jw[:, j]
+                dv = np.cross(wk, vj) + np.cross(vk, wj) - np.cross(Q, np.cross(wk, wj))
+            out[:, j, k] = dv - np.cross(J_C[:, k], Jw[:, j])
+    return out

@@ -1,0 +1,124 @@
+"""The pinocchio provider of step quantities against the Drake one (MultibodyPlant, AutoDiffXd):
+the same numbers, derivatives included, on every shipped scene; the floating base made of
+joints; and the choice of provider, with a clear error or a fallback for joints pinocchio's
+conversion does not cover."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import BallRpyJoint, SpatialInertia, UnitInertia
+
+from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
+from drake_abs.scene import Scene
+from drake_abs.systems.multibody_quantities import (
+    GroundPlane,
+    MultibodyContactModel,
+    PointContact,
+)
+from drake_abs.systems.pinocchio_dynamics import PinocchioContactModel
+
+SCENES = sorted(p.stem for p in (PACKAGE_DIR / "scenes").glob("*.yaml"))
+FIELDS = ("W", "v_free", "phi", "Jn", "Jt", "N", "dW", "dv_free", "dphi", "dJn", "dJt", "dN")
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_quantities_and_derivatives_match_drake(name, rng):
+    sm = build_scene_model(Scene.from_yaml(PACKAGE_DIR / "scenes" / f"{name}.yaml"))
+    ours = sm.contact_model
+    assert isinstance(ours, PinocchioContactModel)  # "auto" picks pinocchio for every scene
+    drake = MultibodyContactModel(ours.plant, ours.contacts, ours.ground, ours.h, 4)
+    ours = PinocchioContactModel(ours.plant, ours.contacts, ours.ground, ours.h, 4)
+    B = 3  # random states around the initial one: joints bent, bases tilted, moving
+    q = sm.q0 + 0.3 * rng.standard_normal((B, ours.nq))
+    v = rng.standard_normal((B, ours.nv))
+    u = rng.standard_normal((B, ours.nu))
+    subset = np.arange(len(ours.contacts))[::2]  # a subset of the contacts, as after pruning
+    for active in (None, subset):
+        a = drake.quantities(q, v, u, active)
+        b = ours.quantities(q, v, u, active)
+        for field in FIELDS:
+            x, y = getattr(a, field), getattr(b, field)
+            assert x.shape == y.shape, field
+            scale = 1.0 + np.abs(x).max(initial=0.0)
+            assert np.abs(x - y).max(initial=0.0) <= 1e-11 * scale, field
+        c = ours.quantities(q, v, u, active, derivatives=False)
+        for field in FIELDS[:6]:  # aba and its derivative routine round differently
+            x = getattr(b, field)
+            np.testing.assert_allclose(
+                getattr(c, field), x, rtol=0, atol=1e-13 * (1 + abs(x).max())
+            )
+    np.testing.assert_allclose(ours.distances(q), drake.distances(q), rtol=0, atol=1e-12)
+
+
+def test_floating_base_is_a_chain_of_joints_with_qdot_equal_to_v():
+    """q = (x, y, z, yaw, pitch, roll): the body's pose is p = (x, y, z), R = Rz Ry Rx."""
+    sm = build_scene_model(Scene.from_yaml(PACKAGE_DIR / "scenes" / "ball_throw.yaml"))
+    plant = sm.plant
+    assert plant.IsVelocityEqualToQDot() and plant.num_positions() == 6
+    q = np.array([0.3, -0.2, 0.7, 0.4, -0.5, 1.1])
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    X_WB = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName("ball"))
+    expected = RigidTransform(RollPitchYaw(q[5], q[4], q[3]), q[:3])
+    assert X_WB.IsNearlyEqualTo(expected, 1e-14)
+    # the intermediate bodies are massless: the mass matrix is the ball's alone
+    assert plant.CalcTotalMass(context) == pytest.approx(0.2)
+
+
+def _ball_joint_plant() -> MultibodyPlant:
+    plant = MultibodyPlant(0.0)
+    body = plant.AddRigidBody(
+        "link", SpatialInertia(1.0, np.zeros(3), UnitInertia.SolidSphere(0.1))
+    )
+    plant.AddJoint(BallRpyJoint("shoulder", plant.world_frame(), body.body_frame(), damping=0.0))
+    plant.Finalize()
+    return plant
+
+
+def test_unsupported_joint_raises_naming_the_joint():
+    plant = _ball_joint_plant()
+    contacts = [PointContact("link", (0.0, 0.0, -0.5))]
+    with pytest.raises(NotImplementedError, match="shoulder.*BallRpyJoint"):
+        PinocchioContactModel(plant, contacts, GroundPlane(height=-1.0), 0.01)
+    # the Drake provider takes any joint
+    MultibodyContactModel(plant, contacts, GroundPlane(height=-1.0), 0.01)
+
+
+BALL_JOINT_SDF = """<?xml version="1.0"?>
+<sdf version="1.7">
+  <model name="pendulum">
+    <link name="link">
+      <inertial><mass>1.0</mass>
+        <inertia><ixx>0.01</ixx><iyy>0.01</iyy><izz>0.01</izz>
+          <ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia>
+      </inertial>
+    </link>
+    <joint name="shoulder" type="ball">
+      <parent>world</parent><child>link</child>
+    </joint>
+  </model>
+</sdf>
+"""
+
+
+def test_scene_dynamics_choice_and_fallback(tmp_path):
+    path = tmp_path / "pendulum.sdf"
+    path.write_text(BALL_JOINT_SDF)
+    data = {
+        "name": "pendulum",
+        "models": [{"file": str(path)}],
+        "contacts": [{"body": "link", "points": [[0.0, 0.0, -0.5]]}],
+        "ground_height": -1.0,
+    }
+    auto = build_scene_model(Scene.from_dict(data))
+    assert type(auto.contact_model) is MultibodyContactModel  # auto: falls back to Drake
+    with pytest.raises(NotImplementedError, match="shoulder"):
+        build_scene_model(Scene.from_dict({**data, "dynamics": "pinocchio"}))
+    box = Scene.from_yaml(PACKAGE_DIR / "scenes" / "box_push.yaml")
+    forced = build_scene_model(Scene.from_dict({**box.to_dict(), "dynamics": "drake"}))
+    assert type(forced.contact_model) is MultibodyContactModel
+    with pytest.raises(ValueError, match="dynamics must be one of"):
+        Scene.from_dict({**data, "dynamics": "mujoco"})
