@@ -57,7 +57,7 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array
-from drake_abs.ipm_kernel import iterate, prepare, unscale
+from drake_abs.ipm_kernel import solve
 from drake_abs.matrix_class import MatrixClass, classify_matrix
 from drake_abs.sensitivity import implicit_jacobians
 
@@ -276,9 +276,7 @@ def solve_lcp(
     # --- scaling (exact powers of two), compiled with the iterations ------------------------
     shared = F.ndim == 2
     F3 = np.ascontiguousarray(F[None] if shared else F)
-    D, Fs, qs, c, mu_s, gap_scale, lam, s = prepare(
-        F3, shared, np.ascontiguousarray(Q), np.ascontiguousarray(mu_full), exact_tol, tol
-    )
+    lam0 = s0 = Q  # unused placeholders unless warm-started
     if warm_start is not None:
         lam0 = as_finite_array(warm_start[0], "warm_start[0]")
         s0 = as_finite_array(warm_start[1], "warm_start[1]")
@@ -288,16 +286,14 @@ def solve_lcp(
         lam0, s0 = lam0.reshape(Q.shape), s0.reshape(Q.shape)
         if np.any(lam0 <= 0) or np.any(s0 <= 0):
             raise ValueError("warm_start (lam0, s0) must be strictly positive")
-        lam = lam0 * D / c[:, None]
-        s = s0 / (D * c[:, None])
-
-    status, iterations, residual = iterate(
-        Fs, shared, qs, mu_s, gap_scale, lam, s, float(tol), int(max_iterations),
-        np.ascontiguousarray(monotone),
+    # scaling, iterations and unscaling in one compiled call. A solution the scaled iterations
+    # found can still over- or underflow in original units (|q| near 1e155, F_ii near 1e-320):
+    # such problems come back with finite = False and are flagged, never passed as valid.
+    status, iterations, residual, lam_out, s_out, mu_out, mu_target, finite = solve(
+        F3, shared, np.ascontiguousarray(Q), np.ascontiguousarray(mu_full), exact_tol, float(tol),
+        int(max_iterations), np.ascontiguousarray(monotone), np.ascontiguousarray(lam0),
+        np.ascontiguousarray(s0), warm_start is not None,
     )  # fmt: skip
-    # A solution the scaled iterations found can still over- or underflow in original units
-    # (|q| near 1e155, F_ii near 1e-320): such problems are flagged, never passed as valid.
-    lam_out, s_out, mu_out, mu_target, finite = unscale(lam, s, mu_s, D, c, shared)
     dlam_dq = dlam_dmu = None
     if jacobians:
         with np.errstate(all="ignore"):

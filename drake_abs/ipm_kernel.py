@@ -387,3 +387,24 @@ def unscale(lam, s, mu_s, D, c, shared):
             if not ok:
                 finite[b] = False
     return lam_out, s_out, mu_out, target, finite
+
+
+@nb.njit(cache=True)
+def solve(F, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, lam0, s0, warm):
+    """:func:`prepare`, :func:`iterate` and :func:`unscale` in one compiled call (the whole
+    solve in original units). With ``warm``, the iterations start from ``(lam0, s0)`` (B, d),
+    original units, strictly positive. Returns ``(status, iterations, residual, lam, s,
+    lam o s, target mu, finite)``."""
+    D, Fs, qs, c, mu_s, gap_scale, lam, s = prepare(F, shared, Q, mu_full, exact_tol, tol)
+    if warm:
+        B, d = Q.shape
+        for b in range(B):
+            f = 0 if shared else b
+            for i in range(d):
+                lam[b, i] = lam0[b, i] * D[f, i] / c[b]
+                s[b, i] = s0[b, i] / (D[f, i] * c[b])
+    status, iterations, residual = iterate(
+        Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monotone
+    )
+    lam_out, s_out, mu_out, target, finite = unscale(lam, s, mu_s, D, c, shared)
+    return status, iterations, residual, lam_out, s_out, mu_out, target, finite

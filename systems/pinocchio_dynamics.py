@@ -132,6 +132,7 @@ class PinocchioContactModel(ContactModelBase):
     ):
         super().__init__(plant, contacts, ground, time_step, directions)
         self._eye = np.eye(self.nq)
+        self._lower = np.tril_indices(self.nv, -1)
         self.pin_model, carried = pinocchio_model_from_plant(plant)
         self.pin_data = self.pin_model.createData()
         free = self.pin_model.copy()
@@ -218,13 +219,14 @@ class PinocchioContactModel(ContactModelBase):
         tau = self.B_act @ np.asarray(u, float)
         if not derivatives:
             a = pin.aba(model, data, q, v, tau)
-            W = pin.computeMinverse(model, data, q)
-            W = np.triu(W) + np.triu(W, 1).T
+            W = pin.computeMinverse(model, data, q)  # upper triangle
+            W[self._lower] = W.T[self._lower]
             pin.computeJointJacobians(model, data, q)
             out = self._contacts(q, active, False)
             return dict(W=W, v_free=v + h * a, N=self._eye, **out)
         da_dq, da_dv, W = pin.computeABADerivatives(model, data, q, v, tau)
-        W = np.triu(W) + np.triu(W, 1).T
+        W = W.copy()  # data.Minv, upper triangle
+        W[self._lower] = W.T[self._lower]
         a = data.ddq.copy()
         P = nq + nv + nu
         dv_free = np.zeros((nv, P))
