@@ -110,6 +110,10 @@ class ContactModelBase:
                 else plant.GetBodyByName(c.body)
             )
             self._bodies_d.append(body)
+        self._setup()
+
+    def _setup(self) -> None:
+        """Provider-specific set-up, after the shared attributes exist."""
 
     def cone_for(self, active: np.ndarray) -> FrictionCone:
         """The friction cone of a subset of the contacts (indices)."""
@@ -158,15 +162,8 @@ class MultibodyContactModel(ContactModelBase):
     :class:`ContactModelBase`.
     """
 
-    def __init__(
-        self,
-        plant: MultibodyPlant,
-        contacts: list[PointContact],
-        ground: GroundPlane,
-        time_step: float,
-        directions: int = 4,
-    ):
-        super().__init__(plant, contacts, ground, time_step, directions)
+    def _setup(self) -> None:
+        plant = self.plant
         self.plant_ad = plant.ToAutoDiffXd()
         self.context_ad = self.plant_ad.CreateDefaultContext()
         self._bodies = [self.plant_ad.get_body(b.index()) for b in self._bodies_d]

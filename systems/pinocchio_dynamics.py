@@ -28,7 +28,7 @@ import pinocchio as pin
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import PrismaticJoint, RevoluteJoint, WeldJoint
 
-from drake_abs.systems.multibody_quantities import ContactModelBase, GroundPlane, PointContact
+from drake_abs.systems.multibody_quantities import ContactModelBase
 
 
 def _se3(X) -> pin.SE3:
@@ -122,15 +122,8 @@ class PinocchioContactModel(ContactModelBase):
     against one ground plane, evaluated by pinocchio. Arguments as
     :class:`~drake_abs.systems.multibody_quantities.MultibodyContactModel`."""
 
-    def __init__(
-        self,
-        plant: MultibodyPlant,
-        contacts: list[PointContact],
-        ground: GroundPlane,
-        time_step: float,
-        directions: int = 4,
-    ):
-        super().__init__(plant, contacts, ground, time_step, directions)
+    def _setup(self) -> None:
+        plant = self.plant
         self._eye = np.eye(self.nq)
         self._lower = np.tril_indices(self.nv, -1)
         self.pin_model, carried = pinocchio_model_from_plant(plant)
