@@ -1,0 +1,175 @@
+"""Policies, the batched closed-loop rollout and its adjoint gradient, and the estimators.
+
+Checks: policy vector-Jacobian products against their Jacobians and central differences; the
+adjoint gradient of each rollout's return against central differences (fixed noise) and against
+an independent forward-mode chain rule (paper 000 eq. 4.1); on a problem without contact, the
+first- and zeroth-order estimators agree in expectation (both unbiased); seeding; bad input.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numdiff import central_difference
+
+from drake_abs import ContactAware, Fixed, point_mass_lcs
+from drake_abs.estimators import (
+    PolicyObjective,
+    alpha_order,
+    ars,
+    first_order,
+    randomized_smoothing,
+    zeroth_order,
+)
+from drake_abs.policies import LinearPolicy, MLPPolicy
+from drake_abs.policy_rollout import LcsStepper, rollout_memory_bytes, rollout_policy
+from drake_abs.rewards import QuadraticReward
+
+NX, NU = 4, 2  # the 2-D point mass: x = (p_x, p_z, v_x, v_z), u = force
+
+
+def ball_task(smoothing, gradient="frozen", horizon=40, height=0.3):
+    """A 2-D ball thrown at the ground: it bounces (inelastically) during the horizon."""
+    lcs = point_mass_lcs(2, time_step=0.02)
+    reward = QuadraticReward(
+        Q=np.diag([0.0, 1.0, 0.0, 0.01]),
+        R=0.01 * np.eye(NU),
+        x_goal=np.array([1.0, 0.2, 0.0, 0.0]),
+        Q_final=np.diag([10.0, 1.0, 0.0, 0.0]),
+    )
+    x0 = np.array([0.0, height, 1.0, -1.0])
+    return LcsStepper(lcs, smoothing, gradient), reward, x0, horizon
+
+
+@pytest.mark.parametrize("policy", [LinearPolicy(NX, NU), MLPPolicy(NX, NU, (8, 8))])
+def test_policy_vjp_matches_jacobians_and_finite_differences(policy, rng):
+    theta = 0.5 * rng.standard_normal(policy.n_params)
+    x = rng.standard_normal((3, NX))
+    du_dx, du_dth = policy.jacobians(theta, x)
+    g = rng.standard_normal((3, NU))
+    gx, gth = policy.vjp(theta, x, g)
+    np.testing.assert_allclose(gx, np.einsum("mi,mij->mj", g, du_dx), atol=1e-12)
+    np.testing.assert_allclose(gth, np.einsum("mi,mij->mj", g, du_dth), atol=1e-12)
+    for m in range(3):
+        fd_x = central_difference(lambda y, m=m: policy.act(theta, y[None])[0], x[m])
+        fd_th = central_difference(lambda th, m=m: policy.act(th, x[m : m + 1])[0], theta)
+        np.testing.assert_allclose(du_dx[m], fd_x, atol=1e-8)
+        np.testing.assert_allclose(du_dth[m], fd_th, atol=1e-8)
+
+
+def forward_mode_gradient(stepper, policy, theta, x0, noise, reward, sigma):
+    """dJ/dtheta per rollout by forward accumulation of dx_t/dtheta (eq. 4.1)."""
+    M, H, _ = noise.shape
+    x = np.broadcast_to(x0, (M, NX)).copy()
+    dx = np.zeros((M, NX, theta.size))
+    g = np.zeros((M, theta.size))
+    for t in range(H):
+        du_dx, du_dth = policy.jacobians(theta, x)
+        u = policy.act(theta, x) + sigma * noise[:, t]
+        du = du_dx @ dx + du_dth
+        _, dr_dx, dr_du = reward.stage(x, u)
+        g += np.einsum("mi,mip->mp", dr_dx, dx) + np.einsum("mi,mip->mp", dr_du, du)
+        s = stepper.step(x, u)
+        dx = s.dx_dx @ dx + s.dx_du @ du
+        x = s.x_next
+    _, drT = reward.terminal(x)
+    return g + np.einsum("mi,mip->mp", drT, dx)
+
+
+@pytest.mark.parametrize(
+    ("smoothing", "gradient"),
+    [(Fixed(1e-2), "frozen"), (ContactAware(mu_max=1e-2, length=0.1), "total")],
+)
+@pytest.mark.parametrize("policy", [LinearPolicy(NX, NU), MLPPolicy(NX, NU, (8,))])
+def test_adjoint_gradient_matches_forward_mode_and_finite_differences(
+    smoothing, gradient, policy, rng
+):
+    stepper, reward, x0, H = ball_task(smoothing, gradient)
+    theta = 0.1 * rng.standard_normal(policy.n_params)
+    noise = rng.standard_normal((3, H, NU))
+    r = rollout_policy(stepper, policy, theta, x0, noise, reward, sigma=0.5)
+    assert r.converged.all()
+    assert r.x[:, :, 1].min() < 0.05  # the ball reaches the ground: contact is in the gradient
+    fwd = forward_mode_gradient(stepper, policy, theta, x0, noise, reward, 0.5)
+    np.testing.assert_allclose(r.grad, fwd, rtol=1e-9, atol=1e-9 * np.abs(fwd).max())
+    for m in range(3):
+
+        def J(th, m=m):
+            one = rollout_policy(
+                stepper, policy, th, x0, noise[m : m + 1], reward, sigma=0.5, gradient=False
+            )
+            return one.returns[0]
+
+        fd = central_difference(J, theta, eps=1e-6)
+        np.testing.assert_allclose(r.grad[m], fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+        fd_x0 = central_difference(
+            lambda y, m=m: rollout_policy(
+                stepper, policy, theta, y, noise[m : m + 1], reward, sigma=0.5, gradient=False
+            ).returns[0],
+            x0,
+            eps=1e-6,
+        )
+        np.testing.assert_allclose(r.grad_x0[m], fd_x0, rtol=1e-5, atol=1e-5 * np.abs(fd_x0).max())
+
+
+def free_flight_objective(sigma=0.3):
+    """No contact within the horizon (the ball starts 10 m up): J is smooth, FO is unbiased."""
+    stepper, reward, _, _ = ball_task(Fixed(0.0))
+    return PolicyObjective(
+        stepper, LinearPolicy(NX, NU), reward, np.array([0.0, 10.0, 1.0, 0.0]), 10, sigma
+    )
+
+
+def test_first_and_zeroth_order_agree_in_expectation():
+    obj = free_flight_objective()
+    theta = np.full(obj.policy.n_params, 0.05)
+    fo = first_order(obj, theta, np.random.default_rng(1), 4000)
+    # the ZO estimate's spread, from independent batches
+    zos = [zeroth_order(obj, theta, np.random.default_rng(10 + k), 4000).grad for k in range(8)]
+    zo_mean = np.mean(zos, axis=0)
+    zo_sem = np.std(zos, axis=0, ddof=1) / np.sqrt(len(zos))
+    assert np.all(np.abs(zo_mean - fo.grad) <= 4 * zo_sem + 1e-3 * np.abs(fo.grad).max())
+    # alpha-order interpolates: alpha = 1 is first order on the same draws
+    a1 = alpha_order(obj, theta, np.random.default_rng(1), 4000, 1.0)
+    np.testing.assert_allclose(a1.grad, fo.grad, rtol=1e-12)
+
+
+def test_randomized_smoothing_and_ars_point_uphill_on_a_smooth_objective():
+    obj = free_flight_objective(sigma=0.0)
+    theta = np.zeros(obj.policy.n_params)
+    exact = first_order(obj, theta, np.random.default_rng(0), 1).grad  # deterministic
+    rs = randomized_smoothing(obj, theta, np.random.default_rng(2), 64, 1e-3).grad
+    np.testing.assert_allclose(rs, exact, rtol=1e-2, atol=1e-3 * np.abs(exact).max())
+    a = ars(obj, theta, np.random.default_rng(3), directions=64, step=1e-3).grad
+    assert a @ exact > 0.5 * np.linalg.norm(a) * np.linalg.norm(exact)
+
+
+def test_same_seed_same_numbers_and_memory_formula():
+    stepper, reward, x0, _ = ball_task(Fixed(1e-3))
+    obj = PolicyObjective(stepper, LinearPolicy(NX, NU), reward, x0, 20, 0.2)
+    theta = np.full(obj.policy.n_params, 0.1)
+    a = first_order(obj, theta, np.random.default_rng(7), 16)
+    b = first_order(obj, theta, np.random.default_rng(7), 16)
+    np.testing.assert_array_equal(a.grad, b.grad)
+    assert a.rollouts == 16 and a.steps == 16 * 20 and a.unconverged == 0
+    # M = 1024, H = 1000 for this 2-D ball: stated in the module docstring
+    assert rollout_memory_bytes(1024, 1000, NX, NU) / 1e9 == pytest.approx(0.29, abs=0.01)
+
+
+def test_bad_input_names_the_argument():
+    stepper, reward, x0, H = ball_task(Fixed(1e-3))
+    pol = LinearPolicy(NX, NU)
+    theta = np.zeros(pol.n_params)
+    with pytest.raises(ValueError, match="theta"):
+        rollout_policy(stepper, pol, theta[:-1], x0, np.zeros((2, H, NU)), reward)
+    with pytest.raises(ValueError, match="noise"):
+        rollout_policy(stepper, pol, theta, x0, np.zeros((2, H)), reward)
+    with pytest.raises(ValueError, match="x0"):
+        rollout_policy(stepper, pol, theta, np.zeros((3, NX)), np.zeros((2, H, NU)), reward)
+    with pytest.raises(ValueError, match="sigma"):
+        rollout_policy(stepper, pol, theta, x0, np.zeros((2, H, NU)), reward, sigma=-1.0)
+    with pytest.raises(ValueError, match="sigma > 0"):
+        zeroth_order(PolicyObjective(stepper, pol, reward, x0, H, 0.0), theta,
+                     np.random.default_rng(0), 4)  # fmt: skip
+    with pytest.raises(ValueError, match="Q must be symmetric"):
+        QuadraticReward(np.ones((NX, NX + 1)), np.eye(NU), np.zeros(NX))
