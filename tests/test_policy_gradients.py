@@ -8,6 +8,8 @@ first- and zeroth-order estimators agree in expectation (both unbiased); seeding
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from numdiff import central_difference
@@ -24,6 +26,7 @@ from drake_abs.estimators import (
 from drake_abs.policies import LinearPolicy, MLPPolicy
 from drake_abs.policy_rollout import LcsStepper, rollout_memory_bytes, rollout_policy
 from drake_abs.rewards import QuadraticReward
+from drake_abs.training import SGD, Adam, train
 
 NX, NU = 4, 2  # the 2-D point mass: x = (p_x, p_z, v_x, v_z), u = force
 
@@ -173,3 +176,34 @@ def test_bad_input_names_the_argument():
                      np.random.default_rng(0), 4)  # fmt: skip
     with pytest.raises(ValueError, match="Q must be symmetric"):
         QuadraticReward(np.ones((NX, NX + 1)), np.eye(NU), np.zeros(NX))
+
+
+def test_training_improves_the_return_and_logs_every_iteration(tmp_path):
+    """Hold the ball at 10 m (against gravity) while it drifts to x = 0.2 m: no contact."""
+    base = free_flight_objective(sigma=0.1)
+    reward = QuadraticReward(
+        Q=np.diag([0.0, 10.0, 0.0, 0.1]), R=1e-3 * np.eye(NU),
+        x_goal=np.array([0.2, 10.0, 0.0, 0.0]), Q_final=np.diag([100.0, 10.0, 1.0, 1.0]),
+    )  # fmt: skip
+    obj = PolicyObjective(base.stepper, base.policy, reward, base.x0, 20, 0.1)
+    theta0 = np.zeros(obj.policy.n_params)
+
+    def evaluate(theta):  # the return of the noise-free policy
+        noise = np.zeros((1, obj.horizon, NU))
+        return float(obj.rollout(theta, noise, gradient=False).returns[0])
+
+    runs = [
+        train(lambda th, rng: first_order(obj, th, rng, 16), theta0, Adam(lr=0.05), 30,
+              seed=3, evaluate=evaluate, log_dir=tmp_path / str(k), name="fo", progress=False)
+        for k in range(2)
+    ]  # fmt: skip
+    rows = runs[0].rows
+    assert rows[-1]["eval_return"] > rows[0]["eval_return"] + 0.5 * abs(rows[0]["eval_return"])
+    assert len(rows) == 31 and all(r["rollouts"] == 16 for r in rows[:-1])
+    np.testing.assert_array_equal(runs[0].theta, runs[1].theta)  # the same seed
+    logged = json.loads((tmp_path / "0" / "fo.json").read_text())
+    assert logged["seed"] == 3 and logged["config"]["optimizer"]["kind"] == "Adam"
+    assert (tmp_path / "0" / "fo.csv").read_text().count("\n") == 32  # header + 31 rows
+    sgd = train(lambda th, rng: first_order(obj, th, rng, 16), theta0, SGD(lr=1e-3), 5,
+                seed=3, progress=False)  # fmt: skip
+    assert np.all(np.isfinite(sgd.theta)) and not np.array_equal(sgd.theta, theta0)
