@@ -109,5 +109,6 @@ def make_drake_twin(
     plant.Finalize()
     if plant.num_actuators():
         builder.ExportInput(plant.get_actuation_input_port(), "actuation")
+    builder.ExportOutput(plant.get_state_output_port(), "state")
     diagram = builder.Build()
     return DrakeTwin(diagram, plant, scene_graph)
