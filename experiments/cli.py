@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-EXPERIMENTS = ("bouncing-ball", "box-convergence", "drake-comparison")
+EXPERIMENTS = ("bouncing-ball", "box-convergence", "drake-comparison", "mpc-quadcopter")
 
 
 def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test_size: bool) -> int:
@@ -83,6 +83,13 @@ def main(argv: list[str] | None = None) -> int:
 
         config = ComparisonConfig.test_size() if args.test_size else ComparisonConfig()
         print(report(run(out, config)))
+        print(f"results written to {out.resolve()}")
+        return 0
+    if args.name == "mpc-quadcopter":
+        from drake_abs.experiments.mpc_quadcopter import Config, report, run
+
+        config = Config.test_size() if args.test_size else Config()
+        print(report(run(config, out)))
         print(f"results written to {out.resolve()}")
         return 0
     if args.name == "box-convergence":
