@@ -1,0 +1,589 @@
+"""Gray-box tuning of a QP-MPC on the 12-state quadcopter (paper 003 section 7, Figures 1-2).
+
+1. System identification: 100 closed-loop trajectories near the target under a stabilising MPC
+   (built on the exact hover linearisation; the policy itself never uses it), inputs perturbed
+   by Gaussian noise and clipped to [0, 630] rad/s; (A, B) by least squares in deviations from
+   (x_ref, u_ref) (:mod:`drake_abs.sysid`).
+2. The policy: QP-MPC with the identified model, N = 12, slack penalty 25 (linear and
+   quadratic), theta = (p_Q, p_R, p_P) initialised at Q = Qc, R = Rc and P from the Riccati
+   equation of the identified model (MATH.md section 9).
+3. Closed loop on the nonlinear quadcopter from x_0 (the paper does not state it; we take the
+   origin at hover) to x_ref = (-6, -3.5, 0, 0..) over T = 200 steps; cost C and penalty
+   300 dist_1 (:mod:`drake_abs.graybox`).
+4. 200 gray-box iterations (eq. 10) for gamma = 0.25, 0.5, 0.75, eta = 1 (model only) and
+   eta = 0 (zeroth order only), all from the same theta_0 and with the same random directions;
+   200 iterations with the exact gradient (the nonlinear model's own Jacobians in eq. 8a) and
+   the same step sizes; and the reference "optimised with perfect model knowledge": L-BFGS-B
+   (scipy, box-constrained) on the exact-gradient closed-loop cost, run towards convergence.
+
+Outputs in ``out``: ``figure1_convergence.png`` (tracking cost and constraint violation against
+iterations per method), ``figure2_trajectories.png`` (position and attitude of the trained and of
+the exact-model controller), ``summary.json`` and, optionally, ``flights.html`` (Meshcat).
+The suboptimality of the trained controller (gamma = 0.5, fixed before running) against the
+reference is reported beside the paper's 1111.71 vs 1103.04. Every rollout's MPC statuses are
+counted (fallback and inaccurate steps) and reported per method.
+
+Step sizes: see :mod:`drake_abs.graybox` (the printed formula is checked and reported too).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drake_abs import quadcopter as qc
+from drake_abs.graybox import (
+    ClosedLoopResult,
+    GrayBoxResult,
+    Schedule,
+    TrackingCost,
+    closed_loop,
+    graybox_optimize,
+    step_size_as_printed,
+)
+from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.sysid import LinearModel, identify_linear_model
+
+PAPER_TRAINED_COST = 1111.71
+PAPER_EXACT_MODEL_COST = 1103.04
+X_REF = (-6.0, -3.5, 0.0) + (0.0,) * 9
+STAGE_Q = (1.0,) * 6 + (0.1,) * 6
+STAGE_R = (0.01,) * 4
+TERMINAL_P = (1.0,) * 6 + (1e3,) * 3 + (1.0,) * 3
+SYSID_SPREAD = (0.5, 0.5, 0.5, 0.2, 0.2, 0.2, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05)
+
+
+@dataclass(frozen=True)
+class Config:
+    """The experiment's settings (paper values unless noted).
+
+    Attributes:
+        iterations: gray-box updates per method (200).
+        steps: closed-loop horizon T (200).
+        horizon: MPC horizon N (12).
+        gammas: eta_k = 1 / (k + 1)^gamma schedules (0.25, 0.5, 0.75).
+        baselines: also run eta = 1 (model only) and eta = 0 (zeroth order only).
+        exact_model: also tune with the exact gradient: the gray-box schedule with eta = 1, and
+            the reference "optimised with perfect model knowledge", L-BFGS-B for at most
+            ``reference_iterations`` iterations.
+        trained_gamma: the hybrid reported as "the trained controller" (chosen before running:
+            the middle schedule).
+        x0: initial state (not stated in the paper: hover at the origin).
+        sysid_trajectories, sysid_length: closed-loop runs (100) and their steps.
+        sysid_input_noise: std (rad/s) of the Gaussian input perturbation during identification.
+        sysid_spread: half-widths of the uniform initial states around x_ref.
+        delta: eq. 9's smoothing radius (1e-4). theta_bound: Theta = {|theta_i| <= bound}.
+        penalty_weight: 300. slack_penalty: 25 (linear and quadratic).
+        seed: seeds identification noise and the directions v_k.
+        meshcat: also write the Meshcat HTML of the two flights.
+    """
+
+    iterations: int = 200
+    steps: int = 200
+    horizon: int = 12
+    gammas: tuple[float, ...] = (0.25, 0.5, 0.75)
+    baselines: bool = True
+    exact_model: bool = True
+    reference_iterations: int = 200
+    trained_gamma: float = 0.5
+    x0: tuple[float, ...] = (0.0,) * 12
+    sysid_trajectories: int = 100
+    sysid_length: int = 20
+    sysid_input_noise: float = 3.0
+    sysid_spread: tuple[float, ...] = SYSID_SPREAD
+    delta: float = 1e-4
+    theta_bound: float = 100.0
+    penalty_weight: float = 300.0
+    slack_penalty: float = 25.0
+    seed: int = 0
+    meshcat: bool = True
+    params: qc.QuadcopterParams = field(default_factory=qc.QuadcopterParams)
+
+    @classmethod
+    def test_size(cls) -> Config:
+        """A few iterations on a short closed loop (seconds; what CI runs)."""
+        return cls(
+            iterations=2, steps=30, sysid_trajectories=10, sysid_length=10, reference_iterations=1
+        )
+
+    def __post_init__(self):
+        for name in (
+            "iterations",
+            "steps",
+            "horizon",
+            "sysid_trajectories",
+            "sysid_length",
+            "reference_iterations",
+        ):
+            value = getattr(self, name)
+            if int(value) != value or value < (0 if name == "iterations" else 1):
+                raise ValueError(f"Config.{name} must be a positive integer; got {value!r}")
+        if self.trained_gamma not in self.gammas:
+            raise ValueError(f"Config.trained_gamma {self.trained_gamma} is not in gammas")
+        if len(self.x0) != 12 or len(self.sysid_spread) != 12:
+            raise ValueError("Config.x0 and Config.sysid_spread need 12 entries")
+
+
+@dataclass
+class _Problem:
+    params: qc.QuadcopterParams
+    spec: MpcSpec
+    cost: TrackingCost
+    model: LinearModel
+    theta0: np.ndarray
+    x0: np.ndarray
+
+    def plant(self, x, u, jacobians=False):
+        return qc.step(x, u, self.params, jacobians=jacobians)
+
+    def controller(self) -> QpMpc:
+        return QpMpc(self.spec, self.theta0)
+
+
+def identify(config: Config, rng: np.random.Generator) -> tuple[LinearModel, dict]:
+    """Step 1: closed-loop data near the target and the least-squares model."""
+    prm = config.params
+    x_ref, u_ref = np.array(X_REF), prm.hover_input()
+    x_min, x_max = qc.QuadcopterConstraints().state_bounds()
+    u_min, u_max = qc.QuadcopterConstraints().input_bounds()
+    A_h, B_h = qc.hover_linearization(prm)
+    Q, R = np.diag(STAGE_Q), np.diag(STAGE_R)
+    P, _ = riccati_terminal_cost(A_h, B_h, Q, R)
+    spec = MpcSpec(A_h, B_h, config.horizon, x_ref, u_ref, u_min, u_max, x_min, x_max)
+    stabilising = QpMpc(spec, theta_from_cost(STAGE_Q, STAGE_R, P))
+    X, U, Xn = [], [], []
+    fallbacks = 0
+    spread = np.asarray(config.sysid_spread)
+    for _ in range(config.sysid_trajectories):
+        x = x_ref + spread * rng.uniform(-1.0, 1.0, 12)
+        for _ in range(config.sysid_length):
+            sol = stabilising.solve(x)
+            fallbacks += int(sol.fallback)
+            noise = rng.normal(0.0, config.sysid_input_noise, 4)
+            u = np.clip(sol.u0 + noise, u_min, u_max)
+            x_next = qc.step(x, u, prm).x_next
+            X.append(x)
+            U.append(u)
+            Xn.append(x_next)
+            x = x_next
+    model = identify_linear_model(np.array(X), np.array(U), np.array(Xn), x_ref, u_ref)
+    info = {
+        "transitions": model.samples,
+        "rank": model.rank,
+        "residual_rms_max": float(model.residual_rms.max()),
+        "max_abs_A_minus_hover_jacobian": float(np.abs(model.A - A_h).max()),
+        "max_abs_B_minus_hover_jacobian": float(np.abs(model.B - B_h).max()),
+        "max_abs_B_hover": float(np.abs(B_h).max()),
+        "stabilising_mpc_fallback_steps": fallbacks,
+    }
+    return model, info
+
+
+def build_problem(config: Config, rng: np.random.Generator) -> tuple[_Problem, dict]:
+    """Steps 1-2: the identified model, the MPC spec, the cost and theta_0."""
+    prm = config.params
+    model, sysid = identify(config, rng)
+    x_ref, u_ref = np.array(X_REF), prm.hover_input()
+    con = qc.QuadcopterConstraints()
+    x_min, x_max = con.state_bounds()
+    u_min, u_max = con.input_bounds()
+    spec = MpcSpec(
+        model.A,
+        model.B,
+        config.horizon,
+        x_ref,
+        u_ref,
+        u_min,
+        u_max,
+        x_min,
+        x_max,
+        slack_linear=config.slack_penalty,
+        slack_quadratic=config.slack_penalty,
+    )
+    Q, R = np.diag(STAGE_Q), np.diag(STAGE_R)
+    P, _ = riccati_terminal_cost(model.A, model.B, Q, R)
+    theta0 = theta_from_cost(STAGE_Q, STAGE_R, P)
+    cost = TrackingCost(
+        Q, R, np.diag(TERMINAL_P), x_ref, u_ref, x_min, x_max, config.penalty_weight
+    )
+    problem = _Problem(prm, spec, cost, model, theta0, np.asarray(config.x0, dtype=float))
+    return problem, sysid
+
+
+class _Counting:
+    """evaluate(theta, with_gradient) on a fresh controller (its own OSQP warm start), counting
+    the MPC statuses of every rollout it runs."""
+
+    def __init__(self, problem: _Problem, source: str, steps: int):
+        self.problem, self.source, self.steps = problem, source, steps
+        self.controller = problem.controller()
+        self.rollouts = self.fallback_steps = self.inaccurate_steps = 0
+
+    def __call__(self, theta: np.ndarray, with_gradient: bool) -> ClosedLoopResult:
+        p = self.problem
+        r = closed_loop(
+            self.controller,
+            theta,
+            p.x0,
+            self.steps,
+            p.plant,
+            p.cost,
+            gradient=self.source if with_gradient else None,
+            model=(p.spec.A, p.spec.B),
+        )
+        self.rollouts += 1
+        self.fallback_steps += r.fallback_steps
+        self.inaccurate_steps += int(np.sum(r.status == int(MpcStatus.SOLVED_INACCURATE)))
+        return r
+
+
+def _tune(problem, config, schedule, source, label) -> tuple[GrayBoxResult, dict]:
+    from tqdm.auto import tqdm
+
+    evaluate = _Counting(problem, source, config.steps)
+    bar = tqdm(total=config.iterations + 1, desc=label, leave=False)
+
+    def progress(rec):
+        bar.set_postfix(total=f"{rec.total:.1f}")
+        bar.update()
+
+    start = time.perf_counter()
+    result = graybox_optimize(
+        evaluate,
+        problem.theta0,
+        iterations=config.iterations,
+        schedule=schedule,
+        rng=np.random.default_rng(config.seed + 1),
+        delta=config.delta,
+        bound=config.theta_bound,
+        progress=progress,
+    )
+    bar.close()
+    stats = {
+        "seconds": time.perf_counter() - start,
+        "rollouts": evaluate.rollouts,
+        "fallback_steps": evaluate.fallback_steps,
+        "inaccurate_steps": evaluate.inaccurate_steps,
+    }
+    return result, stats
+
+
+def _method_summary(result: GrayBoxResult, stats: dict) -> dict:
+    trace = result.trace
+    totals = np.array([r.total for r in trace])
+    best = int(np.argmin(totals))
+    return {
+        "initial_total": trace[0].total,
+        "final_tracking_cost": trace[-1].tracking_cost,
+        "final_violation": trace[-1].violation,
+        "final_total": trace[-1].total,
+        "best_total": float(totals[best]),
+        "best_iteration": trace[best].k,
+        **stats,
+        "tracking_cost": [r.tracking_cost for r in trace],
+        "violation": [r.violation for r in trace],
+        "total": [r.total for r in trace],
+        "direction_norm": [r.direction_norm for r in trace],
+        "theta_final": result.theta.tolist(),
+    }
+
+
+def _exact_reference(problem: _Problem, config: Config) -> tuple[ClosedLoopResult, dict]:
+    """Tuning with perfect model knowledge, run towards convergence: box-constrained L-BFGS-B
+    (scipy) on the total cost with the exact closed-loop gradient (eq. 8, true Jacobians)."""
+    import scipy.optimize
+
+    evaluate = _Counting(problem, "exact", config.steps)
+    history = []
+
+    def fun(theta):
+        r = evaluate(theta, True)
+        return r.total, r.gradient
+
+    def callback(intermediate_result):
+        history.append(float(intermediate_result.fun))
+
+    start = time.perf_counter()
+    res = scipy.optimize.minimize(
+        fun,
+        problem.theta0,
+        jac=True,
+        method="L-BFGS-B",
+        bounds=[(-config.theta_bound, config.theta_bound)] * problem.theta0.size,
+        options={"maxiter": config.reference_iterations},
+        callback=callback,
+    )
+    final = evaluate(res.x, False)
+    info = {
+        "method": "L-BFGS-B on the exact-gradient closed-loop cost",
+        "iterations": int(res.nit),
+        "evaluations": int(res.nfev),
+        "message": str(res.message),
+        "final_tracking_cost": final.tracking_cost,
+        "final_violation": final.violation,
+        "final_total": final.total,
+        "total": [float(fun_value) for fun_value in history],
+        "seconds": time.perf_counter() - start,
+        "rollouts": evaluate.rollouts,
+        "fallback_steps": evaluate.fallback_steps,
+        "inaccurate_steps": evaluate.inaccurate_steps,
+        "theta_final": res.x.tolist(),
+    }
+    return final, info
+
+
+def run(config: Config | None = None, out: str | Path = "results/mpc-quadcopter") -> dict:
+    """Run the experiment (seeded), write its figures and summary to ``out``; returns the
+    summary dict."""
+    config = config or Config()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(config.seed)
+    start = time.perf_counter()
+    problem, sysid = build_problem(config, rng)
+
+    methods: list[tuple[str, Schedule, str]] = [
+        (f"gamma={g:g}", Schedule(gamma=g), "model") for g in config.gammas
+    ]
+    if config.baselines:
+        methods += [
+            ("model only (eta=1)", Schedule(eta=1.0), "model"),
+            ("zeroth order only (eta=0)", Schedule(eta=0.0), "model"),
+        ]
+    if config.exact_model:
+        methods.append(("exact model", Schedule(eta=1.0, name="exact model"), "exact"))
+    results: dict[str, GrayBoxResult] = {}
+    summary_methods = {}
+    for label, schedule, source in methods:
+        result, stats = _tune(problem, config, schedule, source, label)
+        results[label] = result
+        summary_methods[label] = _method_summary(result, stats)
+    reference = reference_info = None
+    if config.exact_model:
+        reference, reference_info = _exact_reference(problem, config)
+
+    # the printed step-size formula, one model-based step from theta_0 (see drake_abs.graybox)
+    evaluate = _Counting(problem, "model", config.steps)
+    r0 = evaluate(problem.theta0, True)
+    theta1 = np.clip(
+        problem.theta0 - step_size_as_printed(1) * r0.gradient,
+        -config.theta_bound,
+        config.theta_bound,
+    )
+    r1 = evaluate(theta1, False)
+    printed = {
+        "alpha_1": step_size_as_printed(1),
+        "total_before": r0.total,
+        "total_after_one_step": r1.total,
+    }
+
+    trained_label = f"gamma={config.trained_gamma:g}"
+    trained = results[trained_label]
+    comparison = {
+        "trained_controller": trained_label,
+        "paper": {
+            "trained": PAPER_TRAINED_COST,
+            "exact_model": PAPER_EXACT_MODEL_COST,
+            "suboptimality": PAPER_TRAINED_COST / PAPER_EXACT_MODEL_COST - 1.0,
+        },
+    }
+    if config.exact_model:
+        ours_t = trained.trace[-1].total
+        same = results["exact model"].trace[-1].total
+        comparison["ours"] = {
+            "trained": ours_t,
+            "exact_model": reference.total,
+            "suboptimality": ours_t / reference.total - 1.0,
+            "exact_model_same_schedule": same,
+            "suboptimality_vs_same_schedule": ours_t / same - 1.0,
+            "trained_tracking_cost": trained.trace[-1].tracking_cost,
+            "exact_model_tracking_cost": reference.tracking_cost,
+            "initial": trained.trace[0].total,
+        }
+    files = {
+        "figure1": str(out / "figure1_convergence.png"),
+        "summary": str(out / "summary.json"),
+    }
+    _figure1(summary_methods, reference_info, Path(files["figure1"]))
+    if config.exact_model:
+        files["figure2"] = str(out / "figure2_trajectories.png")
+        _figure2(trained.final, reference, problem, Path(files["figure2"]))
+        if config.meshcat:
+            from drake_abs.diagrams.quadcopter_visualization import record_quadcopter_html
+
+            files["meshcat_html"] = str(
+                record_quadcopter_html(
+                    {"trained": trained.final.x, "exact_model": reference.x},
+                    out / "flights.html",
+                    time_step=config.params.time_step,
+                    target=np.array(X_REF[:3]),
+                )
+            )
+    summary = {
+        "config": _jsonable(asdict(config)),
+        "assumptions": {
+            "x0": "not stated in the paper; hover at the origin",
+            "step_size": "alpha_k = 5e-5 (log k + 2) / (k + 1)^0.75 (printed formula diverges)",
+            "theta_set": f"box |theta_i| <= {config.theta_bound} (not stated in the paper)",
+            "slack_penalty": f"{config.slack_penalty} (s's + 1's)",
+            "exact_model_tuning": (
+                "reference: L-BFGS-B with the exact gradient (towards convergence); also the "
+                "gray-box schedule with eta = 1 and the exact gradient"
+            ),
+        },
+        "sysid": sysid,
+        "initial": {
+            "tracking_cost": trained.trace[0].tracking_cost,
+            "violation": trained.trace[0].violation,
+            "total": trained.trace[0].total,
+        },
+        "methods": summary_methods,
+        "exact_model_reference": reference_info,
+        "comparison": comparison,
+        "printed_step_size_check": printed,
+        "seconds": time.perf_counter() - start,
+        "files": files,
+    }
+    Path(files["summary"]).write_text(json.dumps(_jsonable(summary), indent=2))
+    return summary
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def _figure1(methods: dict, reference: dict | None, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    for label, m in methods.items():
+        k = np.arange(1, len(m["total"]) + 1)
+        style = {"color": "k", "ls": "--"} if label == "exact model" else {}
+        ax[0].plot(k, m["tracking_cost"], label=label, **style)
+        ax[1].plot(k, m["violation"], label=label, **style)
+    if reference is not None:
+        ax[0].axhline(
+            reference["final_tracking_cost"], color="k", ls=":", label="exact model, L-BFGS-B"
+        )
+        ax[1].axhline(reference["final_violation"], color="k", ls=":")
+    ax[0].set(xlabel="iteration k", ylabel="tracking cost C(theta_k)", title="tracking cost")
+    ax[1].set(
+        xlabel="iteration k",
+        ylabel="dist_1(x, X^{T+1}) (state units)",
+        title="constraint violation",
+    )
+    ax[1].set_yscale("symlog", linthresh=1e-3)
+    ax[1].set_ylim(bottom=0.0)
+    ax[0].legend(fontsize=8)
+    fig.suptitle("Paper 003 Figure 1 analogue: quadcopter, gray-box tuning")
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def _figure2(
+    trained: ClosedLoopResult, exact: ClosedLoopResult, problem: _Problem, path: Path
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.arange(trained.x.shape[0]) * problem.params.time_step
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    colors = ("C0", "C1", "C2")
+    for i, name in enumerate(("p_x", "p_y", "p_z")):
+        ax[0].plot(t, trained.x[:, i], color=colors[i], label=f"{name} trained")
+        ax[0].plot(t, exact.x[:, i], color=colors[i], ls="-.", label=f"{name} exact model")
+    for i, name in enumerate(("roll", "pitch", "yaw")):
+        ax[1].plot(t, trained.x[:, 6 + i], color=colors[i], label=f"{name} trained")
+        ax[1].plot(t, exact.x[:, 6 + i], color=colors[i], ls="-.", label=f"{name} exact model")
+    ax[0].set(xlabel="t (s)", ylabel="position (m)", title="position")
+    ax[1].set(xlabel="t (s)", ylabel="angle (rad)", title="attitude")
+    for a in ax:
+        a.legend(fontsize=7, ncol=2)
+    fig.suptitle(
+        "Paper 003 Figure 2 analogue: trained (solid) vs optimised with the exact model (dash-dot)"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def report(summary: dict) -> str:
+    """A text summary: per-method results and the comparison with the paper."""
+    lines = ["MPC quadcopter (paper 003): gray-box tuning of the QP-MPC cost"]
+    s = summary["sysid"]
+    lines.append(
+        f"  system identification: {s['transitions']} transitions, rank {s['rank']}, one-step "
+        f"residual rms <= {s['residual_rms_max']:.2e}; |A - A_hover|max "
+        f"{s['max_abs_A_minus_hover_jacobian']:.2e}, |B - B_hover|max "
+        f"{s['max_abs_B_minus_hover_jacobian']:.2e}"
+    )
+    ini = summary["initial"]
+    lines.append(
+        f"  theta_0: tracking cost {ini['tracking_cost']:.2f}, violation {ini['violation']:.4f}, "
+        f"total {ini['total']:.2f}"
+    )
+    lines.append(
+        f"  {'method':28s} {'final C':>10s} {'final viol':>11s} {'final total':>12s} "
+        f"{'best total (k)':>18s} {'fallback/inacc. steps':>22s} {'time':>7s}"
+    )
+    for label, m in summary["methods"].items():
+        lines.append(
+            f"  {label:28s} {m['final_tracking_cost']:10.2f} {m['final_violation']:11.4f} "
+            f"{m['final_total']:12.2f} {m['best_total']:11.2f} ({m['best_iteration']:3d}) "
+            f"{m['fallback_steps']:12d} / {m['inaccurate_steps']:<7d} {m['seconds']:6.0f}s"
+        )
+    ref = summary.get("exact_model_reference")
+    if ref:
+        lines.append(
+            f"  {'exact model, L-BFGS-B':28s} {ref['final_tracking_cost']:10.2f} "
+            f"{ref['final_violation']:11.4f} {ref['final_total']:12.2f} "
+            f"{'(' + str(ref['iterations']) + ' it, ' + str(ref['evaluations']) + ' ev)':>18s} "
+            f"{ref['fallback_steps']:12d} / {ref['inaccurate_steps']:<7d} {ref['seconds']:6.0f}s"
+            f"  [{ref['message']}]"
+        )
+    c = summary["comparison"]
+    p = c["paper"]
+    if "ours" in c:
+        o = c["ours"]
+        lines.append(
+            f"  trained ({c['trained_controller']}) vs optimised with the exact model, final total "
+            f"cost: ours {o['trained']:.2f} vs {o['exact_model']:.2f} "
+            f"({100 * o['suboptimality']:+.2f} %); paper {p['trained']:.2f} vs "
+            f"{p['exact_model']:.2f} ({100 * p['suboptimality']:+.2f} %)"
+        )
+        lines.append(
+            f"  (against exact-gradient tuning on the same schedule: {o['trained']:.2f} vs "
+            f"{o['exact_model_same_schedule']:.2f}, "
+            f"{100 * o['suboptimality_vs_same_schedule']:+.2f} %)"
+        )
+    pr = summary["printed_step_size_check"]
+    lines.append(
+        f"  step size as printed (alpha_1 = {pr['alpha_1']:.3f}): one model step takes the total "
+        f"from {pr['total_before']:.1f} to {pr['total_after_one_step']:.3g}"
+    )
+    lines.append(f"  {summary['seconds']:.0f} s in all")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(report(run(Config.test_size(), "results/mpc-quadcopter-test")))
