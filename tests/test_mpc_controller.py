@@ -5,6 +5,21 @@ QPs."""
 
 import numpy as np
 import pytest
+from mpc_setup import (
+    A_H,
+    B_H,
+    K_LQR,
+    PRM,
+    Q_D,
+    R_D,
+    THETA,
+    U_MAX,
+    U_MIN,
+    U_REF,
+    X_MAX,
+    X_MIN,
+    X_REF,
+)  # noqa: F401
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
@@ -16,20 +31,10 @@ from drake_abs.diagrams.quadcopter_mpc import (
     simulate_closed_loop,
 )
 from drake_abs.graybox import TrackingCost, closed_loop
-from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc
 from drake_abs.systems import autodiff
 from drake_abs.systems.mpc_controller import MpcController, MpcController_, status_name
 
-PRM = qc.QuadcopterParams()
-A_H, B_H = qc.hover_linearization(PRM)
-X_REF = np.r_[-6.0, -3.5, 0.0, np.zeros(9)]
-U_REF = PRM.hover_input()
-Q_D = np.r_[np.ones(6), 0.1 * np.ones(6)]
-R_D = np.full(4, 0.01)
-P_DARE, K_LQR = riccati_terminal_cost(A_H, B_H, np.diag(Q_D), np.diag(R_D))
-THETA = theta_from_cost(Q_D, R_D, P_DARE)
-X_MIN, X_MAX = qc.QuadcopterConstraints().state_bounds()
-U_MIN, U_MAX = qc.QuadcopterConstraints().input_bounds()
 P_C = np.diag(np.r_[np.ones(6), 1e3 * np.ones(3), np.ones(3)])
 COST = TrackingCost(np.diag(Q_D), np.diag(R_D), P_C, X_REF, U_REF, X_MIN, X_MAX, 300.0)
 

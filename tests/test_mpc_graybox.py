@@ -3,6 +3,20 @@ estimate (eq. 9), the gray-box update (eq. 10), and least-squares identification
 
 import numpy as np
 import pytest
+from mpc_setup import (
+    A_H,
+    B_H,
+    PRM,
+    Q_D,
+    R_D,
+    THETA,
+    U_MAX,
+    U_MIN,
+    U_REF,
+    X_MAX,
+    X_MIN,
+    X_REF,
+)  # noqa: F401
 from numdiff import central_difference
 
 from drake_abs import quadcopter as qc
@@ -17,19 +31,9 @@ from drake_abs.graybox import (
     step_size_as_printed,
     zeroth_order_estimate,
 )
-from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc
 from drake_abs.sysid import identify_linear_model
 
-PRM = qc.QuadcopterParams()
-A_H, B_H = qc.hover_linearization(PRM)
-X_REF = np.r_[-6.0, -3.5, 0.0, np.zeros(9)]
-U_REF = PRM.hover_input()
-Q_D = np.r_[np.ones(6), 0.1 * np.ones(6)]
-R_D = np.full(4, 0.01)
-P_DARE, K_LQR = riccati_terminal_cost(A_H, B_H, np.diag(Q_D), np.diag(R_D))
-THETA = theta_from_cost(Q_D, R_D, P_DARE)
-X_MIN, X_MAX = qc.QuadcopterConstraints().state_bounds()
-U_MIN, U_MAX = qc.QuadcopterConstraints().input_bounds()
 COST = TrackingCost(
     np.diag(Q_D), np.diag(R_D), np.diag(np.r_[np.ones(6), 1e3 * np.ones(3), np.ones(3)]),
     X_REF, U_REF, X_MIN, X_MAX, 300.0,

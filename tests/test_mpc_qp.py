@@ -6,6 +6,17 @@ bad input."""
 import numpy as np
 import osqp
 import pytest
+from mpc_setup import (
+    A_H,
+    B_H,
+    K_LQR,
+    P_DARE,
+    Q_D,
+    R_D,
+    THETA,
+    U_REF,
+    X_REF,
+)  # noqa: F401
 from numdiff import central_difference
 
 from drake_abs import quadcopter as qc
@@ -16,18 +27,8 @@ from drake_abs.qp_mpc import (
     QpMpc,
     ThetaLayout,
     cost_matrices,
-    riccati_terminal_cost,
     theta_from_cost,
 )
-
-PRM = qc.QuadcopterParams()
-A_H, B_H = qc.hover_linearization(PRM)
-X_REF = np.r_[-6.0, -3.5, 0.0, np.zeros(9)]
-U_REF = PRM.hover_input()
-Q_D = np.r_[np.ones(6), 0.1 * np.ones(6)]
-R_D = np.full(4, 0.01)
-P_DARE, K_LQR = riccati_terminal_cost(A_H, B_H, np.diag(Q_D), np.diag(R_D))
-THETA = theta_from_cost(Q_D, R_D, P_DARE)
 
 
 def paper_spec(**kw) -> MpcSpec:
