@@ -19,7 +19,7 @@ from mpc_setup import (
     X_MAX,
     X_MIN,
     X_REF,
-)  # noqa: F401
+)
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource

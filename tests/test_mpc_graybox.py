@@ -16,7 +16,7 @@ from mpc_setup import (
     X_MAX,
     X_MIN,
     X_REF,
-)  # noqa: F401
+)
 from numdiff import central_difference
 
 from drake_abs import quadcopter as qc

@@ -16,7 +16,7 @@ from mpc_setup import (
     THETA,
     U_REF,
     X_REF,
-)  # noqa: F401
+)
 from numdiff import central_difference
 
 from drake_abs import quadcopter as qc
