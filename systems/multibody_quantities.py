@@ -10,6 +10,7 @@ contacts a scene declares exist (and AutoDiffXd distance queries are not needed)
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,7 +63,7 @@ def _split(arr: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
     return value, grad.reshape(arr.shape + (P,))
 
 
-class ContactModelBase:
+class ContactModelBase(ABC):
     """What every provider of step quantities shares: the plant's sizes and actuation matrix,
     the contact candidates, the ground, h and the friction cone.
 
@@ -112,6 +113,7 @@ class ContactModelBase:
             self._bodies_d.append(body)
         self._setup()
 
+    @abstractmethod
     def _setup(self) -> None:
         """Provider-specific set-up, after the shared attributes exist."""
 
@@ -146,13 +148,13 @@ class ContactModelBase:
             fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
         return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
 
+    @abstractmethod
     def _one(self, q, v, u, active, derivatives: bool) -> dict:
         """The quantities of one state (the fields of StepQuantities but q and v)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def distances(self, q: np.ndarray) -> np.ndarray:
         """Signed distances (B, nc) in m of every contact candidate, in double."""
-        raise NotImplementedError
 
 
 class MultibodyContactModel(ContactModelBase):
