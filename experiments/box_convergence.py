@@ -52,7 +52,7 @@ _MASSLESS = (
 
 
 @dataclass(frozen=True)
-class SweepConfig:
+class Config:
     """The grid. ``mobility_ratios`` are m L^2 / I_yy; ``masses`` in kg; ``time_steps`` in s."""
 
     frictions: tuple[float, ...] = (0.0, 0.1, 0.5, 1.0, 2.0)
@@ -63,7 +63,7 @@ class SweepConfig:
     policies: tuple[str, ...] = ("exact", "abs")
 
     @classmethod
-    def test_size(cls) -> SweepConfig:
+    def test_size(cls) -> Config:
         return cls(
             frictions=(0.0, 0.5, 2.0),
             masses=(1e-3, 1e3),
@@ -135,9 +135,9 @@ def run_case(scene: Scene, steps: int, push: float) -> dict:
     }
 
 
-def run(config: SweepConfig | None = None, out: str | Path | None = None) -> dict:
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Run the sweep; returns (and writes to ``out``/box_convergence.json) the table."""
-    config = config or SweepConfig()
+    config = config or Config()
     rows = []
     grid = itertools.product(
         config.policies, config.frictions, config.masses, config.mobility_ratios, config.time_steps
@@ -183,4 +183,4 @@ def report(summary: dict) -> str:
 
 
 if __name__ == "__main__":
-    print(report(run(SweepConfig.test_size())))
+    print(report(run(Config.test_size())))

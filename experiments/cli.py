@@ -7,10 +7,18 @@ drake-abs experiment NAME [--out DIR] [--test-size]
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from pathlib import Path
 
-EXPERIMENTS = ("bouncing-ball", "box-convergence", "drake-comparison", "mpc-quadcopter")
+# Experiment name -> module of drake_abs.experiments. Each module has ``Config`` (with a
+# ``test_size()`` constructor), ``run(config, out) -> dict`` and ``report(summary) -> str``.
+# The bouncing ball (also the demo) has its own runner below.
+STANDARD_EXPERIMENTS: dict[str, str] = {
+    "box-convergence": "box_convergence",
+    "mpc-quadcopter": "mpc_quadcopter",
+}
+EXPERIMENTS = ("bouncing-ball", "drake-comparison", *STANDARD_EXPERIMENTS)
 
 
 def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test_size: bool) -> int:
@@ -32,6 +40,14 @@ def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test
     print(f"results written to {out.resolve()}:")
     for path in summary["files"].values():
         print(f"  {path}")
+    return 0
+
+
+def _run_standard(module_name: str, out: Path, *, test_size: bool) -> int:
+    module = importlib.import_module(f"drake_abs.experiments.{module_name}")
+    config = module.Config.test_size() if test_size else module.Config()
+    print(module.report(module.run(config, out)))
+    print(f"results written to {out.resolve()}")
     return 0
 
 
@@ -85,20 +101,8 @@ def main(argv: list[str] | None = None) -> int:
         print(report(run(out, config)))
         print(f"results written to {out.resolve()}")
         return 0
-    if args.name == "mpc-quadcopter":
-        from drake_abs.experiments.mpc_quadcopter import Config, report, run
-
-        config = Config.test_size() if args.test_size else Config()
-        print(report(run(config, out)))
-        print(f"results written to {out.resolve()}")
-        return 0
-    if args.name == "box-convergence":
-        from drake_abs.experiments.box_convergence import SweepConfig, report, run
-
-        config = SweepConfig.test_size() if args.test_size else SweepConfig()
-        print(report(run(config, out)))
-        print(f"results written to {out.resolve()}")
-        return 0
+    if args.name in STANDARD_EXPERIMENTS:
+        return _run_standard(STANDARD_EXPERIMENTS[args.name], out, test_size=args.test_size)
     return _run_bouncing_ball(out, duration=None, meshcat=True, test_size=args.test_size)
 
 

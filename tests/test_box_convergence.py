@@ -1,11 +1,11 @@
 """The frictional solver's convergence sweep on the box, at CI size (the full grid is
 ``drake-abs experiment box-convergence``; its figures are in the closing notes)."""
 
-from drake_abs.experiments.box_convergence import SweepConfig, report, run
+from drake_abs.experiments.box_convergence import Config, report, run
 
 
 def test_sweep_runs_the_extremes_without_nan_and_reports_failures():
-    summary = run(SweepConfig.test_size())  # raises on any non-finite state or Jacobian
+    summary = run(Config.test_size())  # raises on any non-finite state or Jacobian
     assert summary["steps"] == 48 * 12
     text = report(summary)
     assert f"{summary['converged_steps']} of {summary['steps']} steps converged" in text
@@ -18,7 +18,7 @@ def test_sweep_runs_the_extremes_without_nan_and_reports_failures():
 def test_exact_contact_converges_over_the_whole_grid_for_friction_up_to_one():
     """Exact contact, friction up to 1: every step converges at every time step (1e-4 to 5e-2),
     mass and mobility ratio (the full sweep: 0 failures in 9 600 steps)."""
-    config = SweepConfig(
+    config = Config(
         frictions=(0.1, 1.0),
         masses=(1e-3, 1e3),
         mobility_ratios=(1e-3, 1e3),
@@ -34,7 +34,7 @@ def test_abs_converges_at_ordinary_time_steps():
     """ABS, friction up to 1, h = 1e-2 over extreme mass and mobility ratios: every step
     converges (the full sweep: 0 failures in 4 800 steps at h >= 1e-2; its failures are at
     h = 1e-4, reported in the closing notes)."""
-    config = SweepConfig(
+    config = Config(
         frictions=(0.1, 0.5, 1.0),
         masses=(1e-3, 1e3),
         mobility_ratios=(1e-3, 2.4, 10.0),
