@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
-from drake_abs.ipm import LCPResult, solve_lcp
+from drake_abs.ipm import LCPResult, check_solver_options, solve_lcp_trusted
 from drake_abs.lcs import GradientMode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 
@@ -82,6 +82,7 @@ class FrictionCone:
     directions: int = 4
     regularization: float = 1e-8
     _frictional: np.ndarray = field(init=False, repr=False, compare=False)
+    _row_contact: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         coeff = np.asarray(self.coefficients, dtype=float).reshape(-1)
@@ -96,12 +97,21 @@ class FrictionCone:
             )
         object.__setattr__(self, "coefficients", coeff)
         object.__setattr__(self, "directions", int(self.directions))
-        object.__setattr__(self, "_frictional", np.flatnonzero(frictional))
+        fr = np.flatnonzero(frictional)
+        object.__setattr__(self, "_frictional", fr)
+        rows = np.concatenate([np.arange(coeff.size), np.repeat(fr, int(self.directions)), fr])
+        object.__setattr__(self, "_row_contact", rows.astype(np.int64))
 
     @property
     def frictional(self) -> np.ndarray:
         """Indices of the frictional contacts (nf,)."""
         return self._frictional
+
+    @property
+    def row_contact(self) -> np.ndarray:
+        """The contact each LCP row belongs to (d,): normal rows, then k tangent rows per
+        frictional contact, then one cone row per frictional contact."""
+        return self._row_contact
 
     def sizes(self) -> tuple[int, int, int]:
         """``(nc, nt, nf)``: contacts, tangent rows (k per frictional contact), cone rows."""
@@ -275,13 +285,20 @@ def contact_step(
     mu = _expand_mu(mu_n, cone, h)
     jac = quant.has_derivatives
     options = {**CONTACT_SOLVER_DEFAULTS, **solver_options}
-    lcp = solve_lcp(F, z, mu, jacobians=jac, strict=strict, on_bad_matrix="attempt", **options)
+    unknown = set(options) - set(CONTACT_SOLVER_DEFAULTS) - {"tol"}
+    if unknown:
+        raise ValueError(
+            f"unknown solver option(s) {sorted(unknown)}: expected tol, max_iterations, exact_tol"
+        )
+    options.setdefault("tol", 1e-12)
+    check_solver_options(options["tol"], options["max_iterations"], options["exact_tol"])
+    lcp = solve_lcp_trusted(F, z, mu, jacobians=jac, strict=strict, **options)
     lam = lcp.lam
     lam_v = lam[:, : nc + nt]
     G = np.concatenate([quant.Jn, quant.Jt], axis=1)
-    f = np.einsum("brn,br->bn", G, lam_v)  # generalised impulse G^T lam
-    v_next = quant.v_free + np.einsum("bnm,bm->bn", quant.W, f)
-    q_next = quant.q + h * np.einsum("bqn,bn->bq", quant.N, v_next)
+    f, v_next, q_next = _integrate(
+        quant.q, quant.W, quant.v_free, np.ascontiguousarray(G), quant.N, lam_v, h
+    )
     out = dict(dx_dx=None, dx_du=None, dlam_dx=None, dlam_du=None)
     if jac:
         out = _step_jacobians(
@@ -296,6 +313,32 @@ def contact_step(
         lcp=lcp,
         **out,
     )
+
+
+@nb.njit(cache=True)
+def _integrate(q, W, v_free, G, N, lam_v, h):
+    """``f = G^T lam``, ``v+ = v_free + W f``, ``q+ = q + h N v+`` for a batch."""
+    B, nv = v_free.shape
+    nq = q.shape[1]
+    r = G.shape[1]
+    f = np.zeros((B, nv))
+    v_next = v_free.copy()
+    q_next = q.copy()
+    for b in range(B):
+        for i in range(r):
+            for n in range(nv):
+                f[b, n] += G[b, i, n] * lam_v[b, i]
+        for n in range(nv):
+            acc = 0.0
+            for m in range(nv):
+                acc += W[b, n, m] * f[b, m]
+            v_next[b, n] += acc
+        for i in range(nq):
+            acc = 0.0
+            for n in range(nv):
+                acc += N[b, i, n] * v_next[b, n]
+            q_next[b, i] += h * acc
+    return f, v_next, q_next
 
 
 def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
@@ -326,23 +369,16 @@ def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
 
 def _expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
     """Per-row mu (B, d) from per-contact mu (B, nc): friction and cone rows get mu / h."""
-    nc, nt, nf = cone.sizes()
-    fr = cone.frictional
-    k = cone.directions
-    parts = [mu_n]
-    if nf:
-        parts += [np.repeat(mu_n[:, fr], k, axis=1) / h, mu_n[:, fr] / h]
-    return np.concatenate(parts, axis=1)
+    mu = mu_n[:, cone.row_contact]
+    mu[:, cone.sizes()[0] :] /= h
+    return mu
 
 
 def _expand_dmu(dmu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
     """d mu_rows / d z_n (B, d, nc) from d mu_n / d z_n (B, nc, nc)."""
-    nc, nt, nf = cone.sizes()
-    fr = cone.frictional
-    parts = [dmu_n]
-    if nf:
-        parts += [np.repeat(dmu_n[:, fr], cone.directions, axis=1) / h, dmu_n[:, fr] / h]
-    return np.concatenate(parts, axis=1)
+    dmu = dmu_n[:, cone.row_contact]
+    dmu[:, cone.sizes()[0] :] /= h
+    return dmu
 
 
 def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient):

@@ -197,6 +197,17 @@ def apply_matrix_policy(
     return F, delta, classes.astype(np.int8)
 
 
+def check_solver_options(tol: float, max_iterations: int, exact_tol: float) -> None:
+    """Raise ``ValueError`` naming the option unless tol > 0, max_iterations >= 1 (an integer)
+    and 0 < exact_tol < 1."""
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a positive finite number; got {tol!r}")
+    if not isinstance(max_iterations, int | np.integer) or max_iterations < 1:
+        raise ValueError(f"max_iterations must be an integer >= 1; got {max_iterations!r}")
+    if not (np.isfinite(exact_tol) and 0 < exact_tol < 1):
+        raise ValueError(f"exact_tol must be a finite number in (0, 1); got {exact_tol!r}")
+
+
 def solve_lcp(
     F,
     q,
@@ -238,12 +249,7 @@ def solve_lcp(
         representable in the original units (its entries may then be inf or 0, with
         ``converged = False`` and ``residual = inf``).
     """
-    if not (np.isfinite(tol) and tol > 0):
-        raise ValueError(f"tol must be a positive finite number; got {tol!r}")
-    if not isinstance(max_iterations, int | np.integer) or max_iterations < 1:
-        raise ValueError(f"max_iterations must be an integer >= 1; got {max_iterations!r}")
-    if not (np.isfinite(exact_tol) and 0 < exact_tol < 1):
-        raise ValueError(f"exact_tol must be a finite number in (0, 1); got {exact_tol!r}")
+    check_solver_options(tol, max_iterations, exact_tol)
     if on_bad_matrix not in ("raise", "regularize", "attempt", "trusted"):
         raise ValueError(
             "on_bad_matrix must be 'raise', 'regularize', 'attempt' or 'trusted'; "
@@ -273,10 +279,7 @@ def solve_lcp(
     F, delta, classes = apply_matrix_policy(F, on_bad_matrix, B)
     monotone = (classes == MatrixClass.PSD) | (classes == MatrixClass.P_MATRIX) | (delta > 0)
 
-    # --- scaling (exact powers of two), compiled with the iterations ------------------------
-    shared = F.ndim == 2
-    F3 = np.ascontiguousarray(F[None] if shared else F)
-    lam0 = s0 = Q  # unused placeholders unless warm-started
+    lam0 = s0 = None
     if warm_start is not None:
         lam0 = as_finite_array(warm_start[0], "warm_start[0]")
         s0 = as_finite_array(warm_start[1], "warm_start[1]")
@@ -286,19 +289,64 @@ def solve_lcp(
         lam0, s0 = lam0.reshape(Q.shape), s0.reshape(Q.shape)
         if np.any(lam0 <= 0) or np.any(s0 <= 0):
             raise ValueError("warm_start (lam0, s0) must be strictly positive")
+    result = _solve(
+        F, Q, mu_full, monotone, jacobians=jacobians, tol=tol, max_iterations=max_iterations,
+        exact_tol=exact_tol, strict=strict, per_contact_mu=mu_form == "per_contact",
+        regularization=np.broadcast_to(delta, (B,)).copy(), matrix_class=classes,
+        warm_start=None if lam0 is None else (lam0, s0),
+    )  # fmt: skip
+    return _squeeze(result) if single else result
+
+
+def solve_lcp_trusted(
+    F: np.ndarray,
+    q: np.ndarray,
+    mu: np.ndarray,
+    *,
+    jacobians: bool = False,
+    tol: float = 1e-12,
+    max_iterations: int = 100,
+    exact_tol: float = 1e-15,
+    strict: bool = False,
+) -> LCPResult:
+    """:func:`solve_lcp` for callers inside the package whose arrays are already in the batch
+    form: F (B, d, d), q (B, d) and mu (B, d) (one per contact), float64, finite, with options
+    already validated (the rigid-body step, every time step). No shape, finiteness or matrix
+    check is made, and F is treated as possibly non-monotone (as ``on_bad_matrix="attempt"``):
+    the same iterations, flags and warnings as :func:`solve_lcp`, without its per-call checks.
+    ``dlam_dmu`` is (B, d, d)."""
+    B = q.shape[0]
+    return _solve(
+        F, q, mu, np.zeros(B, dtype=bool), jacobians=jacobians, tol=tol,
+        max_iterations=max_iterations, exact_tol=exact_tol, strict=strict, per_contact_mu=True,
+        regularization=np.zeros(B), matrix_class=np.full(B, -1, dtype=np.int8), warm_start=None,
+    )  # fmt: skip
+
+
+def _solve(
+    F, Q, mu_full, monotone, *, jacobians, tol, max_iterations, exact_tol, strict,
+    per_contact_mu, regularization, matrix_class, warm_start,
+) -> LCPResult:  # fmt: skip
+    """The solve proper, on validated batch arrays: F (d, d) shared or (B, d, d), Q (B, d),
+    mu_full (B, d), monotone (B,)."""
+    B = Q.shape[0]
+    shared = F.ndim == 2
+    F3 = np.ascontiguousarray(F[None] if shared else F)
+    warm = warm_start is not None
+    lam0, s0 = warm_start if warm else (Q, Q)  # unused placeholders unless warm-started
     # scaling, iterations and unscaling in one compiled call. A solution the scaled iterations
     # found can still over- or underflow in original units (|q| near 1e155, F_ii near 1e-320):
     # such problems come back with finite = False and are flagged, never passed as valid.
     status, iterations, residual, lam_out, s_out, mu_out, mu_target, finite = solve(
         F3, shared, np.ascontiguousarray(Q), np.ascontiguousarray(mu_full), exact_tol, float(tol),
         int(max_iterations), np.ascontiguousarray(monotone), np.ascontiguousarray(lam0),
-        np.ascontiguousarray(s0), warm_start is not None,
+        np.ascontiguousarray(s0), warm,
     )  # fmt: skip
     dlam_dq = dlam_dmu = None
     if jacobians:
         with np.errstate(all="ignore"):
             dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
-        dlam_dmu = dlam_dmu_pc if mu_form == "per_contact" else dlam_dmu_pc.sum(axis=-1)
+        dlam_dmu = dlam_dmu_pc if per_contact_mu else dlam_dmu_pc.sum(axis=-1)
         for arr in (dlam_dq, dlam_dmu):
             finite &= np.all(np.isfinite(arr.reshape(B, -1)), axis=1)
     status[~finite] = LCPStatus.NUMERICAL_FAILURE
@@ -313,14 +361,14 @@ def solve_lcp(
         converged=converged,
         status=status,
         residual=residual,
-        regularization=np.broadcast_to(delta, (B,)).copy(),
-        matrix_class=classes,
+        regularization=regularization,
+        matrix_class=matrix_class,
         dlam_dq=dlam_dq,
         dlam_dmu=dlam_dmu,
         tol=tol,
     )
     _report(result, strict, max_iterations)
-    return _squeeze(result) if single else result
+    return result
 
 
 def _report(result: LCPResult, strict: bool, max_iterations: int) -> None:
@@ -336,7 +384,7 @@ def _report(result: LCPResult, strict: bool, max_iterations: int) -> None:
     )
     if strict:
         raise LCPConvergenceError(msg)
-    warnings.warn(msg, LCPConvergenceWarning, stacklevel=3)
+    warnings.warn(msg, LCPConvergenceWarning, stacklevel=4)
 
 
 def _squeeze(r: LCPResult) -> LCPResult:

@@ -85,15 +85,19 @@ class ComplementarityStepper:
         return m.nq, m.nv, m.nu, len(m.contacts)
 
     def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True) -> RigidStepResult:
-        """Step a batch: x (B, nq + nv), u (B, nu)."""
+        """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared."""
         nq, nv, nu, nc = self.sizes
-        x = np.atleast_2d(np.asarray(x, float))
-        u = np.broadcast_to(np.asarray(u, float), (x.shape[0], nu))
-        if x.shape[1] != nq + nv:
-            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
-            raise ValueError("x and u must be finite")
+        x = np.asarray(x, dtype=float)
+        if x.ndim == 1:
+            x = x[None]
         B = x.shape[0]
+        u = np.asarray(u, dtype=float)
+        if u.shape != (B, nu):
+            u = np.broadcast_to(u, (B, nu))
+        if x.ndim != 2 or x.shape[1] != nq + nv:
+            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
+        if not (np.isfinite(x).all() and np.isfinite(u).all()):
+            raise ValueError("x and u must be finite")
         q, v = x[:, :nq], x[:, nq:]
         if np.isfinite(self.activation_distance):
             active = self.model.distances(q) <= self.activation_distance
@@ -114,13 +118,15 @@ class ComplementarityStepper:
                 dn_dx=np.zeros((B, nc, nq + nv)),
                 dn_du=np.zeros((B, nc, nu)),
             )
-        if B == 1:
-            masks, group = active, np.zeros(1, dtype=np.int64)
+        if B == 1 or (active == active[0]).all():  # one active set: one batched LCP
+            groups = [(slice(None), np.flatnonzero(active[0]))]
         else:  # states with the same active set share one batched LCP
             masks, group = np.unique(active, axis=0, return_inverse=True)
-        for g, mask in enumerate(masks):
-            rows = np.flatnonzero(group.ravel() == g)
-            idx = np.flatnonzero(mask)
+            groups = [
+                (np.flatnonzero(group.ravel() == g), np.flatnonzero(mask))
+                for g, mask in enumerate(masks)
+            ]
+        for rows, idx in groups:
             quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
             cone = self.model.cone_for(idx)
             r = contact_step(
@@ -131,8 +137,11 @@ class ComplementarityStepper:
         return RigidStepResult(active=active, **out)
 
     def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
+        """Write one group's step into the batch outputs (rows: a slice or row indices)."""
         nc_g, nt, _ = cone.sizes()
-        out["x_next"][rows] = np.concatenate([r.q_next, r.v_next], axis=1)
+        nq = r.q_next.shape[1]
+        out["x_next"][rows, :nq] = r.q_next
+        out["x_next"][rows, nq:] = r.v_next
         out["converged"][rows] = r.converged
         if jacobians:  # also without contact (free flight): the Jacobian is the free step's
             out["dx_dx"][rows] = r.dx_dx
@@ -140,16 +149,22 @@ class ComplementarityStepper:
         if r.lcp is None:
             return
         out["iterations"][rows] = r.lcp.iterations
-        grid = np.ix_(rows, idx)
-        out["normal_impulse"][grid] = r.lam[:, :nc_g]
-        out["mu"][grid] = r.mu
-        k = cone.directions
-        beta = r.lam[:, nc_g : nc_g + nt].reshape(len(rows), -1, k)
+        # rows x contacts blocks: index the rows first (a view for a slice, a copy otherwise)
+        whole = isinstance(rows, slice)
         fr = idx[cone.frictional]
-        out["friction_impulse"][np.ix_(rows, fr)] = beta @ self.model.tangents
+        beta = r.lam[:, nc_g : nc_g + nt].reshape(r.lam.shape[0], -1, cone.directions)
+        blocks = [
+            ("normal_impulse", idx, r.lam[:, :nc_g]),
+            ("mu", idx, r.mu),
+            ("friction_impulse", fr, beta @ self.model.tangents),
+        ]
         if jacobians:
-            out["dn_dx"][grid] = r.dlam_dx[:, :nc_g]
-            out["dn_du"][grid] = r.dlam_du[:, :nc_g]
+            blocks += [("dn_dx", idx, r.dlam_dx[:, :nc_g]), ("dn_du", idx, r.dlam_du[:, :nc_g])]
+        for key, cols, value in blocks:
+            if whole:
+                out[key][:, cols] = value
+            else:
+                out[key][np.ix_(rows, cols)] = value
 
 
 @TemplateSystem.define("ComplementarityPlant_", T_list=[float, AutoDiffXd])

@@ -113,10 +113,6 @@ def pinocchio_model_from_plant(plant: MultibodyPlant) -> tuple[pin.Model, dict]:
     return model, carried
 
 
-def _skew(a: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
 class PinocchioContactModel(ContactModelBase):
     """Step quantities of a MultibodyPlant (revolute and prismatic joints) with point contacts
     against one ground plane, evaluated by pinocchio. Arguments as
@@ -141,66 +137,39 @@ class PinocchioContactModel(ContactModelBase):
         ]
         # velocity indices of the joints on each joint's path from the world, root first
         m = self.pin_model
-        self._paths = {
-            jid: np.array([m.joints[i].idx_v for i in m.supports[jid] if i > 0], dtype=np.int64)
-            for jid, _ in self._points
-        }
+        # per contact, which velocities lie on its body's path from the world (root first)
+        self._on_path = np.full((len(self._points), self.nv), -1, dtype=np.int64)
+        for i, (jid, _) in enumerate(self._points):
+            path = [m.joints[j].idx_v for j in m.supports[jid] if j > 0]
+            self._on_path[i, : len(path)] = path
+        self._radius = np.array([c.radius for c in self.contacts], dtype=float)
+        self._has_friction = np.array([c.friction is not None for c in self.contacts])
 
     def distances(self, q: np.ndarray) -> np.ndarray:
         model, data = self.pin_model, self.pin_data
         out = np.empty((len(q), len(self.contacts)))
         for b, qb in enumerate(q):
             pin.forwardKinematics(model, data, qb)
-            for i, ((jid, p_J), c) in enumerate(zip(self._points, self.contacts, strict=True)):
-                p_W = data.oMi[jid].act(p_J)
-                out[b, i] = self.normal @ p_W - c.radius - self.ground.height
+            centres = np.array([data.oMi[jid].act(p_J) for jid, p_J in self._points])
+            out[b] = centres @ self.normal - self._radius - self.ground.height
         return out
 
     def _contacts(self, q, active, derivatives: bool):
         """phi (na,), Jn (na, nv), Jt (nt, nv) and, with derivatives, dphi/dq (na, nq) and
-        dJn/dq, dJt/dq (rows, nv, nq) for the active contacts, from the joint Jacobians of the
-        last ``computeJointJacobians``.
-
-        With the joints' world-frame (spatial) Jacobian columns ``S_j = (v_j, w_j)``, a point p
-        fixed on the body moves with ``J_p = Jv - [p]x Jw``; for 1-dof joints
-        ``dS_j/dq_k = S_k x S_j`` (motion cross product) when joint k precedes j on the body's
-        path from the world, else 0; and ``dp/dq_k`` is column k of J_p. The witness point
-        ``Q = C - radius n`` moves with the contact centre C.
+        dJn/dq, dJt/dq (rows, nv, nq) for the active contacts, from the world-frame joint
+        Jacobians ``data.J`` of the last ``computeJointJacobians`` (see :func:`_contact_rows`).
         """
-        model, data = self.pin_model, self.pin_data
-        nv = self.nv
-        n = self.normal
-        phi, Jn, Jt, dphi, dJn, dJt = [], [], [], [], [], []
-        for i in active:
-            jid, p_J = self._points[i]
-            c = self.contacts[i]
-            C_W = data.oMi[jid].act(p_J)
-            Q_W = C_W - c.radius * n
-            S = pin.getJointJacobian(model, data, jid, pin.WORLD)
-            Jv, Jw = S[:3], S[3:]
-            J_Q = Jv - _skew(Q_W) @ Jw
-            phi.append(n @ C_W - c.radius - self.ground.height)
-            Jn.append(n @ J_Q)
-            rows = [n] + (list(self.tangents) if c.friction is not None else [])
-            if c.friction is not None:
-                Jt.extend(self.tangents @ J_Q)
-            if derivatives:
-                J_C = Jv - _skew(C_W) @ Jw
-                dphi.append(n @ J_C)
-                dJ_Q = _point_jacobian_derivative(Jv, Jw, self._paths[jid], J_C, Q_W)
-                dJ_rows = np.tensordot(np.array(rows), dJ_Q, axes=1)  # (rows, nv, nq)
-                dJn.append(dJ_rows[0])
-                dJt.extend(dJ_rows[1:])
-        na = len(active)
-        out = {
-            "phi": np.array(phi).reshape(na),
-            "Jn": np.array(Jn).reshape(na, nv),
-            "Jt": np.array(Jt).reshape(len(Jt), nv),
-        }
+        data = self.pin_data
+        active = np.asarray(active, dtype=np.int64)
+        centres = np.array([data.oMi[self._points[i][0]].act(self._points[i][1]) for i in active])
+        phi, Jn, Jt, dphi, dJn, dJt = _contact_rows(
+            centres.reshape(-1, 3), self._radius[active], self.normal, float(self.ground.height),
+            self.tangents, self._has_friction[active], np.ascontiguousarray(data.J),
+            self._on_path[active], derivatives,
+        )  # fmt: skip
+        out = {"phi": phi, "Jn": Jn, "Jt": Jt}
         if derivatives:
-            out["dphi"] = np.array(dphi).reshape(na, self.nq)
-            out["dJn"] = np.array(dJn).reshape(na, nv, self.nq)
-            out["dJt"] = np.array(dJt).reshape(len(dJt), nv, self.nq)
+            out.update(dphi=dphi, dJn=dJn, dJt=dJt)
         return out
 
     def _one(self, q, v, u, active, derivatives: bool) -> dict:
@@ -245,6 +214,69 @@ class PinocchioContactModel(ContactModelBase):
             dW=dW, dv_free=dv_free, dphi=widen(c["dphi"]), dJn=widen(c["dJn"]),
             dJt=widen(c["dJt"]), dN=np.zeros((nq, nv, P)),
         )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _contact_rows(C, radius, n, height, tangents, has_friction, J, paths, derivatives):
+    """Rows of the active contacts: ``phi`` (na,), ``Jn`` (na, nv), ``Jt`` (nt, nv) and, with
+    ``derivatives``, ``dphi`` (na, nv), ``dJn`` (na, nv, nv), ``dJt`` (nt, nv, nv) (d/dq; qdot
+    = v for these joints).
+
+    C (na, 3): contact centres in the world; the witness point is ``Q = C - radius n``. J (6,
+    nv): the world-frame joint Jacobians (linear rows first) of all joints; paths (na, nv): the
+    velocity indices on each contact body's path from the world (root first, -1 padded). The
+    body joint's Jacobian is J restricted to its path's columns, so a point p fixed on the body
+    moves with ``J_p = Jv - [p]x Jw``.
+    """
+    na = C.shape[0]
+    nv = J.shape[1]
+    k = tangents.shape[0]
+    nt = 0
+    for i in range(na):
+        if has_friction[i]:
+            nt += k
+    phi = np.empty(na)
+    Jn = np.zeros((na, nv))
+    Jt = np.zeros((nt, nv))
+    m = nv if derivatives else 0
+    dphi = np.zeros((na, m))
+    dJn = np.zeros((na, m, m))
+    dJt = np.zeros((nt, m, m))
+    row_t = 0
+    for i in range(na):
+        Q = C[i] - radius[i] * n
+        phi[i] = n[0] * C[i, 0] + n[1] * C[i, 1] + n[2] * C[i, 2] - radius[i] - height
+        count = 0
+        while count < nv and paths[i, count] >= 0:
+            count += 1
+        path = paths[i, :count]
+        Jv = np.zeros((3, nv))
+        Jw = np.zeros((3, nv))
+        for j in path:
+            Jv[:, j] = J[:3, j]
+            Jw[:, j] = J[3:, j]
+        J_Q = np.zeros((3, nv))
+        J_C = np.zeros((3, nv))
+        for j in path:
+            J_Q[:, j] = Jv[:, j] - np.cross(Q, Jw[:, j])
+            J_C[:, j] = Jv[:, j] - np.cross(C[i], Jw[:, j])
+        Jn[i] = n @ J_Q
+        if has_friction[i]:
+            Jt[row_t : row_t + k] = tangents @ J_Q
+        if derivatives:
+            dphi[i] = n @ J_C
+            dJ_Q = _point_jacobian_derivative(Jv, Jw, path, J_C, Q)
+            for a in range(nv):
+                for b in range(nv):
+                    d = dJ_Q[:, a, b]
+                    dJn[i, a, b] = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
+                    if has_friction[i]:
+                        for t in range(k):
+                            tt = tangents[t]
+                            dJt[row_t + t, a, b] = tt[0] * d[0] + tt[1] * d[1] + tt[2] * d[2]
+        if has_friction[i]:
+            row_t += k
+    return phi, Jn, Jt, dphi, dJn, dJt
 
 
 @nb.njit(cache=True)
