@@ -42,6 +42,7 @@ respect to q, v and u come from the caller (e.g. Drake AutoDiffXd).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numba as nb
@@ -129,8 +130,11 @@ class StepQuantities:
     per frictional contact, ``N`` (B, nq, nv).
 
     Derivatives with respect to p = (q, v, u), P = nq + nv + nu columns (all None, or all given):
-    ``dW`` (B, nv, nv, P), ``dv_free`` (B, nv, P), ``dphi`` (B, nc, P), ``dJn`` (B, nc, nv, P),
-    ``dJt`` (B, nt, nv, P), ``dN`` (B, nq, nv, P).
+    ``dv_free`` (B, nv, P), ``dphi`` (B, nc, P), ``dJn`` (B, nc, nv, P), ``dJt`` (B, nt, nv, P),
+    ``dN`` (B, nq, nv, P), and the derivative of W either as the array ``dW`` (B, nv, nv, P) or
+    as the product ``dW_times(f) = dW . f`` (a function of f (B, nv) returning (B, nv, P)): the
+    step only needs dW applied to the generalised impulse, which a provider can evaluate
+    without forming dW (``d(W f) = -W dM(W f)``, one inverse-dynamics derivative).
     """
 
     q: np.ndarray
@@ -147,10 +151,19 @@ class StepQuantities:
     dJn: np.ndarray | None = None
     dJt: np.ndarray | None = None
     dN: np.ndarray | None = None
+    dW_times: Callable[[np.ndarray], np.ndarray] | None = None
 
     @property
     def has_derivatives(self) -> bool:
-        return self.dW is not None
+        return self.dv_free is not None
+
+    def dW_dot(self, f: np.ndarray) -> np.ndarray:
+        """``dW . f`` (B, nv, P): the derivative of ``W(q) f`` for a fixed f (B, nv)."""
+        if self.dW is not None:
+            return np.einsum("bnmp,bm->bnp", self.dW, f)
+        if self.dW_times is None:
+            raise ValueError("these quantities carry no derivative of W (dW or dW_times)")
+        return self.dW_times(f)
 
 
 @dataclass(frozen=True)
@@ -382,20 +395,14 @@ def _expand_dmu(dmu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
 
 
 def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient):
+    """The chain rule of the module docstring: dx+/d(x, u) and dlam/d(x, u)."""
     nc, nt, nf = cone.sizes()
     B, nq = quant.q.shape
     nv = quant.v.shape[1]
-    P = quant.dW.shape[-1]
     dG = np.concatenate([quant.dJn, quant.dJt], axis=1)  # (B, nc + nt, nv, P)
-    W = quant.W
-    dGT_lam = np.einsum("brnp,br->bnp", dG, lam_v)  # (B, nv, P)
-    dWf = np.einsum("bnmp,bm->bnp", quant.dW, f)
-    inner = quant.dv_free + dWf + np.einsum("bnm,bmp->bnp", W, dGT_lam)
-    top = np.einsum("brnp,bn->brp", dG, v_next) + np.einsum("brn,bnp->brp", G, inner)
-    top = S[None, :, None] * top
-    top[:, :nc] += quant.dphi
-    dz_eff = np.zeros((B, z.shape[1], P))
-    dz_eff[:, : nc + nt] = top
+    inner, dz_eff = _chain_in(
+        quant.W, G, dG, lam_v, v_next, S, quant.dphi, quant.dv_free, quant.dW_dot(f), z.shape[1]
+    )
     dlam = lcp.dlam_dq @ dz_eff  # (B, d, P)
     if gradient == "total":
         # dz_n/dp: the distance and free-velocity part (mu's dependence on F is held)
@@ -405,12 +412,70 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing
         )
         dmu_rows = _expand_dmu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
         dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
-    dv = inner + np.einsum("bnm,bmp->bnp", W, np.einsum("brn,brp->bnp", G, dlam[:, : nc + nt]))
-    dq = np.zeros((B, nq, P))
-    dq[:, :, :nq] = np.eye(nq)
-    dq += h * (np.einsum("bqnp,bn->bqp", quant.dN, v_next) + np.einsum("bqn,bnp->bqp", quant.N, dv))
-    dx = np.concatenate([dq, dv], axis=1)  # (B, nq + nv, P)
+    dx = _chain_out(inner, quant.W, G, dlam, quant.N, quant.dN, v_next, h)  # (B, nq + nv, P)
     nx = nq + nv
     return dict(
         dx_dx=dx[:, :, :nx], dx_du=dx[:, :, nx:], dlam_dx=dlam[:, :, :nx], dlam_du=dlam[:, :, nx:]
     )
+
+
+@nb.njit(cache=True)
+def _chain_in(W, G, dG, lam_v, v_next, S, dphi, dv_free, dWf, d):
+    """``inner = dv_free + dW f + W dG^T lam`` (B, nv, P) and ``dz_eff`` (B, d, P), the
+    derivative of the LCP's q with F's derivative applied to lam (rows past nc + nt are 0)."""
+    B, r, nv, P = dG.shape
+    nc = dphi.shape[1]
+    inner = np.empty((B, nv, P))
+    dz = np.zeros((B, d, P))
+    dGl = np.empty((nv, P))
+    for b in range(B):
+        for n in range(nv):
+            for p in range(P):
+                acc = 0.0
+                for i in range(r):
+                    acc += dG[b, i, n, p] * lam_v[b, i]
+                dGl[n, p] = acc
+        for n in range(nv):
+            for p in range(P):
+                acc = dv_free[b, n, p] + dWf[b, n, p]
+                for m in range(nv):
+                    acc += W[b, n, m] * dGl[m, p]
+                inner[b, n, p] = acc
+        for i in range(r):
+            for p in range(P):
+                acc = 0.0
+                for n in range(nv):
+                    acc += dG[b, i, n, p] * v_next[b, n] + G[b, i, n] * inner[b, n, p]
+                dz[b, i, p] = S[i] * acc + (dphi[b, i, p] if i < nc else 0.0)
+    return inner, dz
+
+
+@nb.njit(cache=True)
+def _chain_out(inner, W, G, dlam, N, dN, v_next, h):
+    """``dv+ = inner + W G^T dlam`` and ``dq+ = [I 0 0] + h (dN v+ + N dv+)``, stacked (B, nq +
+    nv, P)."""
+    B, nv, P = inner.shape
+    r = G.shape[1]
+    nq = N.shape[1]
+    dx = np.zeros((B, nq + nv, P))
+    tmp = np.empty((nv, P))
+    for b in range(B):
+        for n in range(nv):
+            for p in range(P):
+                acc = 0.0
+                for i in range(r):
+                    acc += G[b, i, n] * dlam[b, i, p]
+                tmp[n, p] = acc
+        for n in range(nv):
+            for p in range(P):
+                acc = inner[b, n, p]
+                for m in range(nv):
+                    acc += W[b, n, m] * tmp[m, p]
+                dx[b, nq + n, p] = acc
+        for i in range(nq):
+            for p in range(P):
+                acc = 0.0
+                for n in range(nv):
+                    acc += dN[b, i, n, p] * v_next[b, n] + N[b, i, n] * dx[b, nq + n, p]
+                dx[b, i, p] = h * acc + (1.0 if p == i else 0.0)
+    return dx

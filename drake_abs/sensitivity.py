@@ -14,7 +14,10 @@ matrix the interior-point iterations factor.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
+
+from drake_abs.ipm_kernel import _invert
 
 
 def batched_inverse(M: np.ndarray) -> np.ndarray:
@@ -68,8 +71,53 @@ def implicit_jacobians(
         ``(dlam_dq, dlam_dmu)``, each (B, d, d); ``dlam_dmu`` is with respect to a per-contact mu
         (sum its last axis for the derivative with respect to one scalar mu).
     """
+    d = lam.shape[-1]
+    if lam.ndim == 2 and d <= _COMPILED_UP_TO:  # a batch of small problems: compiled
+        F3 = np.ascontiguousarray(F[None] if F.ndim == 2 else F, dtype=float)
+        dq, dmu, ok = _implicit_small(F3, F.ndim == 2, lam, slack)
+        if not ok.all():  # singular Newton matrices: the pseudo-inverse path below
+            bad = ~ok
+            Kinv, w = equilibrated_newton_inverse(
+                F if F.ndim == 2 else F[bad], lam[bad], slack[bad]
+            )
+            dq[bad] = -Kinv * (lam[bad] * w)[..., None, :]
+            dmu[bad] = Kinv * w[..., None, :]
+        return dq, dmu
     Kinv, w = equilibrated_newton_inverse(F, lam, slack)
     return -Kinv * (lam * w)[..., None, :], Kinv * w[..., None, :]
+
+
+#: Largest d whose Jacobians use the compiled Gauss-Jordan inverse (LAPACK above).
+_COMPILED_UP_TO = 32
+
+
+@nb.njit(cache=True)
+def _implicit_small(F3, shared, lam, slack):
+    """:func:`implicit_jacobians` for a batch of small problems (F3 (1 or B, d, d)): the same
+    equilibrated matrix ``diag(w) K``, inverted by Gauss-Jordan with partial pivoting; ``ok``
+    (B,) is False where it is singular (those rows are left for the pseudo-inverse path)."""
+    B, d = lam.shape
+    dq = np.zeros((B, d, d))
+    dmu = np.zeros((B, d, d))
+    ok = np.ones(B, dtype=np.bool_)
+    K = np.empty((d, d))
+    inv = np.empty((d, d))
+    aug = np.empty((d, 2 * d))
+    w = np.empty(d)
+    for b in range(B):
+        F = F3[0] if shared else F3[b]
+        for i in range(d):
+            w[i] = 1.0 / (slack[b, i] + lam[b, i])
+            for j in range(d):
+                K[i, j] = lam[b, i] * w[i] * F[i, j]
+            K[i, i] += slack[b, i] * w[i]
+        ok[b] = _invert(K, inv, aug)
+        if ok[b]:
+            for i in range(d):
+                for j in range(d):
+                    dq[b, i, j] = -inv[i, j] * lam[b, j] * w[j]
+                    dmu[b, i, j] = inv[i, j] * w[j]
+    return dq, dmu, ok
 
 
 def equilibrated_newton_inverse(

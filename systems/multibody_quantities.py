@@ -142,10 +142,15 @@ class ContactModelBase(ABC):
         per_state = [
             self._one(qb, vb, ub, active, derivatives) for qb, vb, ub in zip(q, v, u, strict=True)
         ]
+        products = [s.pop("dW_times", None) for s in per_state]  # per-state functions of f
         if len(per_state) == 1:
             fields = {k: np.asarray(x)[None] for k, x in per_state[0].items()}
         else:
             fields = {k: np.stack([s[k] for s in per_state]) for k in per_state[0]}
+        if products[0] is not None:
+            fields["dW_times"] = lambda f: np.stack(
+                [fn(fb) for fn, fb in zip(products, f, strict=True)]
+            )
         return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
 
     @abstractmethod

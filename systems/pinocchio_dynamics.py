@@ -14,10 +14,10 @@ ones the step needs. Scenes with a free root body get a floating base made of su
 
 - values: ``computeMinverse`` (W), ``aba`` (v_free = v + h aba(q, v, B u), gravity and bias
   included), ``computeJointJacobians`` (points and their Jacobians);
-- derivatives: ``computeABADerivatives`` (dv_free), one ``computeRNEADerivatives`` per velocity
-  at zero velocity and gravity (``dM(q) a`` for the columns ``a = W e_j``, so
-  ``dW e_j = -W dM W e_j``), and dJ/dq in closed form from the joint Jacobians (see
-  ``_contacts``).
+- derivatives: ``computeABADerivatives`` (dv_free); dW only as applied to the step's impulse f
+  (``StepQuantities.dW_times``): ``d(W f) = -W dM(q) (W f)``, one ``computeRNEADerivatives`` at
+  zero velocity and gravity with acceleration ``W f``; and dJ/dq in closed form from the joint
+  Jacobians (see ``_contact_rows``).
 """
 
 from __future__ import annotations
@@ -195,12 +195,15 @@ class PinocchioContactModel(ContactModelBase):
         dv_free[:, :nq] = h * da_dq
         dv_free[:, nq : nq + nv] = np.eye(nv) + h * da_dv
         dv_free[:, nq + nv :] = h * W @ self.B_act
-        dW = np.zeros((nv, nv, P))
         fm, fd = self._free_model, self._free_data
         zero = np.zeros(nv)
-        for j in range(nv):  # dM(q) a for a = W e_j, at zero velocity and gravity
-            dtau_dq = pin.computeRNEADerivatives(fm, fd, q, zero, W[:, j])[0]
-            dW[:, j, :nq] = -W @ dtau_dq
+
+        def dW_times(f: np.ndarray) -> np.ndarray:  # (nv,) -> (nv, P): d(W f) = -W dM (W f)
+            dW_f = np.zeros((nv, P))
+            dM_a = pin.computeRNEADerivatives(fm, fd, q, zero, W @ f)[0]  # at zero v, gravity
+            dW_f[:, :nq] = -W @ dM_a
+            return dW_f
+
         pin.computeJointJacobians(model, data, q)
         c = self._contacts(q, active, True)
 
@@ -211,7 +214,7 @@ class PinocchioContactModel(ContactModelBase):
 
         return dict(
             W=W, v_free=v + h * a, N=self._eye, phi=c["phi"], Jn=c["Jn"], Jt=c["Jt"],
-            dW=dW, dv_free=dv_free, dphi=widen(c["dphi"]), dJn=widen(c["dJn"]),
+            dW_times=dW_times, dv_free=dv_free, dphi=widen(c["dphi"]), dJn=widen(c["dJn"]),
             dJt=widen(c["dJt"]), dN=np.zeros((nq, nv, P)),
         )  # fmt: skip
 
