@@ -119,10 +119,11 @@ class ContactModelBase(ABC):
 
     def cone_for(self, active: np.ndarray) -> FrictionCone:
         """The friction cone of a subset of the contacts (indices)."""
-        key = tuple(int(i) for i in active)
+        active = np.asarray(active, dtype=np.int64)
+        key = active.tobytes()
         cone = self._cones.get(key)
         if cone is None:
-            cone = FrictionCone(self.cone.coefficients[list(key)], self.cone.directions)
+            cone = FrictionCone(self.cone.coefficients[active], self.cone.directions)
             self._cones[key] = cone
         return cone
 

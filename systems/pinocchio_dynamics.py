@@ -143,15 +143,33 @@ class PinocchioContactModel(ContactModelBase):
             path = [m.joints[j].idx_v for j in m.supports[jid] if j > 0]
             self._on_path[i, : len(path)] = path
         self._radius = np.array([c.radius for c in self.contacts], dtype=float)
+        joints = sorted({jid for jid, _ in self._points})
+        self._by_joint = []  # (joint id, its contacts' indices, their points in its frame)
+        for jid in joints:
+            idx = np.array([i for i, (j, _) in enumerate(self._points) if j == jid])
+            self._by_joint.append((jid, idx, np.array([self._points[i][1] for i in idx])))
         self._has_friction = np.array([c.friction is not None for c in self.contacts])
+
+    def _centres(self) -> np.ndarray:
+        """World positions (nc, 3) of every contact centre after the last forward kinematics:
+        one placement read per joint that carries contacts."""
+        data = self.pin_data
+        if len(self._by_joint) == 1:  # every contact on one body (a box, a ball)
+            jid, _, p_J = self._by_joint[0]
+            X = data.oMi[jid]
+            return p_J @ X.rotation.T + X.translation
+        out = np.empty((len(self.contacts), 3))
+        for jid, idx, p_J in self._by_joint:
+            X = data.oMi[jid]
+            out[idx] = p_J @ X.rotation.T + X.translation
+        return out
 
     def distances(self, q: np.ndarray) -> np.ndarray:
         model, data = self.pin_model, self.pin_data
         out = np.empty((len(q), len(self.contacts)))
         for b, qb in enumerate(q):
             pin.forwardKinematics(model, data, qb)
-            centres = np.array([data.oMi[jid].act(p_J) for jid, p_J in self._points])
-            out[b] = centres @ self.normal - self._radius - self.ground.height
+            out[b] = self._centres() @ self.normal - self._radius - self.ground.height
         return out
 
     def _contacts(self, q, active, derivatives: bool):
@@ -159,13 +177,10 @@ class PinocchioContactModel(ContactModelBase):
         dJn/dq, dJt/dq (rows, nv, nq) for the active contacts, from the world-frame joint
         Jacobians ``data.J`` of the last ``computeJointJacobians`` (see :func:`_contact_rows`).
         """
-        data = self.pin_data
-        active = np.asarray(active, dtype=np.int64)
-        centres = np.array([data.oMi[self._points[i][0]].act(self._points[i][1]) for i in active])
         phi, Jn, Jt, dphi, dJn, dJt = _contact_rows(
-            centres.reshape(-1, 3), self._radius[active], self.normal, float(self.ground.height),
-            self.tangents, self._has_friction[active], np.ascontiguousarray(data.J),
-            self._on_path[active], derivatives,
+            self._centres(), np.asarray(active, dtype=np.int64), self._radius, self.normal,
+            float(self.ground.height), self.tangents, self._has_friction, self.pin_data.J,
+            self._on_path, derivatives,
         )  # fmt: skip
         out = {"phi": phi, "Jn": Jn, "Jt": Jt}
         if derivatives:
@@ -220,23 +235,25 @@ class PinocchioContactModel(ContactModelBase):
 
 
 @nb.njit(cache=True)
-def _contact_rows(C, radius, n, height, tangents, has_friction, J, paths, derivatives):
-    """Rows of the active contacts: ``phi`` (na,), ``Jn`` (na, nv), ``Jt`` (nt, nv) and, with
-    ``derivatives``, ``dphi`` (na, nv), ``dJn`` (na, nv, nv), ``dJt`` (nt, nv, nv) (d/dq; qdot
-    = v for these joints).
+def _contact_rows(
+    centres, active, radius, n, height, tangents, friction, J, paths, derivatives
+):  # fmt: skip
+    """Rows of the active contacts (indices ``active``, na of them): ``phi`` (na,), ``Jn`` (na,
+    nv), ``Jt`` (nt, nv) and, with ``derivatives``, ``dphi`` (na, nv), ``dJn`` (na, nv, nv),
+    ``dJt`` (nt, nv, nv) (d/dq; qdot = v for these joints).
 
-    C (na, 3): contact centres in the world; the witness point is ``Q = C - radius n``. J (6,
-    nv): the world-frame joint Jacobians (linear rows first) of all joints; paths (na, nv): the
-    velocity indices on each contact body's path from the world (root first, -1 padded). The
-    body joint's Jacobian is J restricted to its path's columns, so a point p fixed on the body
-    moves with ``J_p = Jv - [p]x Jw``.
+    Per candidate: centres (nc, 3) in the world (the witness point is ``Q = C - radius n``),
+    radius (nc,), friction (nc,) whether it has friction, paths (nc, nv) the velocity indices on
+    its body's path from the world (root first, -1 padded). J (6, nv): the world-frame joint
+    Jacobians (linear rows first) of all joints. The body joint's Jacobian is J restricted to
+    its path's columns, so a point p fixed on the body moves with ``J_p = Jv - [p]x Jw``.
     """
-    na = C.shape[0]
+    na = active.shape[0]
     nv = J.shape[1]
     k = tangents.shape[0]
     nt = 0
-    for i in range(na):
-        if has_friction[i]:
+    for a in active:
+        if friction[a]:
             nt += k
     phi = np.empty(na)
     Jn = np.zeros((na, nv))
@@ -247,12 +264,14 @@ def _contact_rows(C, radius, n, height, tangents, has_friction, J, paths, deriva
     dJt = np.zeros((nt, m, m))
     row_t = 0
     for i in range(na):
-        Q = C[i] - radius[i] * n
-        phi[i] = n[0] * C[i, 0] + n[1] * C[i, 1] + n[2] * C[i, 2] - radius[i] - height
+        c = active[i]
+        C = centres[c]
+        Q = C - radius[c] * n
+        phi[i] = n[0] * C[0] + n[1] * C[1] + n[2] * C[2] - radius[c] - height
         count = 0
-        while count < nv and paths[i, count] >= 0:
+        while count < nv and paths[c, count] >= 0:
             count += 1
-        path = paths[i, :count]
+        path = paths[c, :count]
         Jv = np.zeros((3, nv))
         Jw = np.zeros((3, nv))
         for j in path:
@@ -262,9 +281,9 @@ def _contact_rows(C, radius, n, height, tangents, has_friction, J, paths, deriva
         J_C = np.zeros((3, nv))
         for j in path:
             J_Q[:, j] = Jv[:, j] - np.cross(Q, Jw[:, j])
-            J_C[:, j] = Jv[:, j] - np.cross(C[i], Jw[:, j])
+            J_C[:, j] = Jv[:, j] - np.cross(C, Jw[:, j])
         Jn[i] = n @ J_Q
-        if has_friction[i]:
+        if friction[c]:
             Jt[row_t : row_t + k] = tangents @ J_Q
         if derivatives:
             dphi[i] = n @ J_C
@@ -273,11 +292,11 @@ def _contact_rows(C, radius, n, height, tangents, has_friction, J, paths, deriva
                 for b in range(nv):
                     d = dJ_Q[:, a, b]
                     dJn[i, a, b] = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
-                    if has_friction[i]:
+                    if friction[c]:
                         for t in range(k):
                             tt = tangents[t]
                             dJt[row_t + t, a, b] = tt[0] * d[0] + tt[1] * d[1] + tt[2] * d[2]
-        if has_friction[i]:
+        if friction[c]:
             row_t += k
     return phi, Jn, Jt, dphi, dJn, dJt
 
