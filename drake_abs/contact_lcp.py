@@ -84,6 +84,7 @@ class FrictionCone:
     regularization: float = 1e-8
     _frictional: np.ndarray = field(init=False, repr=False, compare=False)
     _row_contact: np.ndarray = field(init=False, repr=False, compare=False)
+    _mu_f: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         coeff = np.asarray(self.coefficients, dtype=float).reshape(-1)
@@ -102,11 +103,17 @@ class FrictionCone:
         object.__setattr__(self, "_frictional", fr)
         rows = np.concatenate([np.arange(coeff.size), np.repeat(fr, int(self.directions)), fr])
         object.__setattr__(self, "_row_contact", rows.astype(np.int64))
+        object.__setattr__(self, "_mu_f", coeff[fr])
 
     @property
     def frictional(self) -> np.ndarray:
         """Indices of the frictional contacts (nf,)."""
         return self._frictional
+
+    @property
+    def friction_coefficients(self) -> np.ndarray:
+        """The coefficients of the frictional contacts (nf,), in the order of ``frictional``."""
+        return self._mu_f
 
     @property
     def row_contact(self) -> np.ndarray:
@@ -196,21 +203,19 @@ def assemble_lcp(
     quant: StepQuantities, cone: FrictionCone, h: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The LCP ``(F (B, d, d), z (B, d))`` of one step, and the row scale S (nc + nt,)."""
-    nc, nt, nf = cone.sizes()
     fr = cone.frictional
-    F, z = _assemble(
-        np.ascontiguousarray(quant.W, dtype=float),
-        np.ascontiguousarray(quant.v_free, dtype=float),
-        np.ascontiguousarray(quant.phi, dtype=float),
-        np.ascontiguousarray(quant.Jn, dtype=float),
-        np.ascontiguousarray(quant.Jt, dtype=float),
+    F, z, S = _assemble(
+        np.asarray(quant.W, dtype=float),
+        np.asarray(quant.v_free, dtype=float),
+        np.asarray(quant.phi, dtype=float),
+        np.asarray(quant.Jn, dtype=float),
+        np.asarray(quant.Jt, dtype=float),
         fr,
-        cone.coefficients[fr],
+        cone.friction_coefficients,
         cone.directions,
         float(cone.regularization),
         float(h),
     )
-    S = np.concatenate([np.full(nc, h), np.ones(nt)])
     return F, z, S
 
 
@@ -225,6 +230,8 @@ def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h):
     d = r + nf
     F = np.zeros((B, d, d))
     z = np.zeros((B, d))
+    S = np.ones(r)
+    S[:nc] = h
     G = np.empty((r, nv))
     WG = np.empty((nv, r))
     for b in range(B):
@@ -260,7 +267,7 @@ def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h):
             weight = reg * mean / nt
             for i in range(nc, r):
                 F[b, i, i] += weight
-    return F, z
+    return F, z, S
 
 
 def contact_step(

@@ -349,8 +349,9 @@ def _solve(
         dlam_dmu = dlam_dmu_pc if per_contact_mu else dlam_dmu_pc.sum(axis=-1)
         for arr in (dlam_dq, dlam_dmu):
             finite &= np.all(np.isfinite(arr.reshape(B, -1)), axis=1)
-    status[~finite] = LCPStatus.NUMERICAL_FAILURE
-    residual[~finite] = np.inf
+    if not finite.all():
+        status[~finite] = LCPStatus.NUMERICAL_FAILURE
+        residual[~finite] = np.inf
     converged = status == LCPStatus.CONVERGED
     result = LCPResult(
         lam=lam_out,
@@ -372,7 +373,7 @@ def _solve(
 
 
 def _report(result: LCPResult, strict: bool, max_iterations: int) -> None:
-    if np.all(result.converged):
+    if result.converged.all():
         return
     bad = ~result.converged
     n_fail = int(np.sum(result.status == LCPStatus.NUMERICAL_FAILURE))
