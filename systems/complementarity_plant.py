@@ -99,7 +99,15 @@ class ComplementarityStepper:
         if not (np.isfinite(x).all() and np.isfinite(u).all()):
             raise ValueError("x and u must be finite")
         q, v = x[:, :nq], x[:, nq:]
-        if np.isfinite(self.activation_distance):
+        pruned = np.isfinite(self.activation_distance)
+        quant = None
+        if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
+            idx, quant = self.model.quantities_within(
+                q, v, u, self.activation_distance, derivatives=jacobians
+            )
+            active = np.zeros((1, nc), dtype=bool)
+            active[0, idx] = True
+        elif pruned:
             active = self.model.distances(q) <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
             active = np.ones((B, nc), dtype=bool)
@@ -127,13 +135,15 @@ class ComplementarityStepper:
                 for g, mask in enumerate(masks)
             ]
         for rows, idx in groups:
-            quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
+            if quant is None:
+                quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
             cone = self.model.cone_for(idx)
             r = contact_step(
                 quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
                 **self.solver_options,
             )  # fmt: skip
             self._scatter(out, rows, idx, cone, r, jacobians)
+            quant = None
         return RigidStepResult(active=active, **out)
 
     def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:

@@ -135,13 +135,16 @@ class ContactModelBase(ABC):
         active: np.ndarray | None = None,
         *,
         derivatives: bool = True,
+        kinematics=None,
     ) -> StepQuantities:
         """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
         (indices; all by default), with derivatives with respect to p = (q, v, u) unless
-        ``derivatives=False``."""
+        ``derivatives=False``. ``kinematics``: a provider's own kinematics of a one-state batch,
+        already evaluated at q (see :meth:`quantities_within`)."""
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
         per_state = [
-            self._one(qb, vb, ub, active, derivatives) for qb, vb, ub in zip(q, v, u, strict=True)
+            self._one(qb, vb, ub, active, derivatives, kinematics)
+            for qb, vb, ub in zip(q, v, u, strict=True)
         ]
         products = [s.pop("dW_times", None) for s in per_state]  # per-state functions of f
         if len(per_state) == 1:
@@ -154,8 +157,18 @@ class ContactModelBase(ABC):
             )
         return StepQuantities(q=np.asarray(q, float), v=np.asarray(v, float), **fields)
 
+    def quantities_within(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, distance: float, *,
+        derivatives: bool = True,
+    ) -> tuple[np.ndarray, StepQuantities]:  # fmt: skip
+        """For one state (q (1, nq), v (1, nv), u (1, nu)): the indices of the candidates within
+        ``distance`` (m) and their quantities. Providers may share the kinematics between the
+        two (pinocchio does); the result equals ``distances`` then ``quantities``."""
+        active = np.flatnonzero(self.distances(q)[0] <= distance)
+        return active, self.quantities(q, v, u, active, derivatives=derivatives)
+
     @abstractmethod
-    def _one(self, q, v, u, active, derivatives: bool) -> dict:
+    def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         """The quantities of one state (the fields of StepQuantities but q and v)."""
 
     @abstractmethod
@@ -231,7 +244,7 @@ class MultibodyContactModel(ContactModelBase):
         out["Jt"] = np.array(Jt, dtype=kind).reshape(len(Jt), nv)
         return out
 
-    def _one(self, q, v, u, active, derivatives: bool) -> dict:
+    def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         nq, nv, nu = self.nq, self.nv, self.nu
         h = self.h
         if not derivatives:

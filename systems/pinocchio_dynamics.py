@@ -172,34 +172,50 @@ class PinocchioContactModel(ContactModelBase):
             out[b] = self._centres() @ self.normal - self._radius - self.ground.height
         return out
 
-    def _contacts(self, q, active, derivatives: bool):
+    def _kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(centres (nc, 3), J (6, nv))`` at q: every contact centre in the world and the
+        world-frame joint Jacobians (one ``computeJointJacobians``)."""
+        pin.computeJointJacobians(self.pin_model, self.pin_data, q)
+        return self._centres(), self.pin_data.J.copy()
+
+    def quantities_within(self, q, v, u, distance, *, derivatives=True):
+        """As the base class, with one kinematics pass for the distances and the quantities."""
+        kinematics = self._kinematics(np.asarray(q[0], float))
+        phi = kinematics[0] @ self.normal - self._radius - self.ground.height
+        active = np.flatnonzero(phi <= distance)
+        quant = self.quantities(q, v, u, active, derivatives=derivatives, kinematics=kinematics)
+        return active, quant
+
+    def _contacts(self, kinematics, active, derivatives: bool):
         """phi (na,), Jn (na, nv), Jt (nt, nv) and, with derivatives, dphi/dq (na, nq) and
-        dJn/dq, dJt/dq (rows, nv, nq) for the active contacts, from the world-frame joint
-        Jacobians ``data.J`` of the last ``computeJointJacobians`` (see :func:`_contact_rows`).
+        dJn/dq, dJt/dq (rows, nv, nq) for the active contacts, from the contact centres and the
+        world-frame joint Jacobians (see :meth:`_kinematics` and :func:`_contact_rows`).
         """
+        centres, J = kinematics
         phi, Jn, Jt, dphi, dJn, dJt = _contact_rows(
-            self._centres(), np.asarray(active, dtype=np.int64), self._radius, self.normal,
-            float(self.ground.height), self.tangents, self._has_friction, self.pin_data.J,
-            self._on_path, derivatives,
+            centres, np.asarray(active, dtype=np.int64), self._radius, self.normal,
+            float(self.ground.height), self.tangents, self._has_friction, J, self._on_path,
+            derivatives,
         )  # fmt: skip
         out = {"phi": phi, "Jn": Jn, "Jt": Jt}
         if derivatives:
             out.update(dphi=dphi, dJn=dJn, dJt=dJt)
         return out
 
-    def _one(self, q, v, u, active, derivatives: bool) -> dict:
+    def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         model, data = self.pin_model, self.pin_data
         nq, nv, nu = self.nq, self.nv, self.nu
         h = self.h
         q = np.asarray(q, float)
+        if kinematics is None:
+            kinematics = self._kinematics(q)
         v = np.asarray(v, float)
         tau = self.B_act @ np.asarray(u, float)
         if not derivatives:
             a = pin.aba(model, data, q, v, tau)
             W = pin.computeMinverse(model, data, q)  # upper triangle
             W[self._lower] = W.T[self._lower]
-            pin.computeJointJacobians(model, data, q)
-            out = self._contacts(q, active, False)
+            out = self._contacts(kinematics, active, False)
             return dict(W=W, v_free=v + h * a, N=self._eye, **out)
         da_dq, da_dv, W = pin.computeABADerivatives(model, data, q, v, tau)
         W = W.copy()  # data.Minv, upper triangle
@@ -219,8 +235,7 @@ class PinocchioContactModel(ContactModelBase):
             dW_f[:, :nq] = -W @ dM_a
             return dW_f
 
-        pin.computeJointJacobians(model, data, q)
-        c = self._contacts(q, active, True)
+        c = self._contacts(kinematics, active, True)
 
         def widen(d):  # (..., nq) -> (..., P): only q-columns are non-zero
             out = np.zeros(d.shape[:-1] + (P,))

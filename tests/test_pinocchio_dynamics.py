@@ -129,3 +129,20 @@ def test_scene_dynamics_choice_and_fallback(tmp_path):
     assert type(forced.contact_model) is MultibodyContactModel
     with pytest.raises(ValueError, match="dynamics must be one of"):
         Scene.from_dict({**data, "dynamics": "mujoco"})
+
+
+@pytest.mark.parametrize("name", ["box_push", "solo12_drop"])
+def test_quantities_within_equals_distances_then_quantities(name, rng):
+    """The one-state path shares the kinematics between pruning and the quantities."""
+    sm = build_scene_model(Scene.from_yaml(PACKAGE_DIR / "scenes" / f"{name}.yaml"))
+    model = sm.contact_model
+    q = sm.q0[None] + 0.05 * rng.standard_normal((1, model.nq))
+    v, u = rng.standard_normal((1, model.nv)), rng.standard_normal((1, model.nu))
+    phi = model.distances(q)[0]
+    distance = float(np.median(phi))  # some candidates in, some out
+    active, got = model.quantities_within(q, v, u, distance)
+    np.testing.assert_array_equal(active, np.flatnonzero(phi <= distance))
+    assert 0 < active.size < phi.size
+    want = model.quantities(q, v, u, active)
+    for field in FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
