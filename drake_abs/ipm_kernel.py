@@ -48,14 +48,14 @@ def _invert(K, out, aug):
                 tmp = aug[c, j]
                 aug[c, j] = aug[p, j]
                 aug[p, j] = tmp
-        piv = aug[c, c]
-        for j in range(2 * d):
-            aug[c, j] /= piv
+        inv_piv = 1.0 / aug[c, c]
+        for j in range(c, 2 * d):  # columns left of c are zero in row c
+            aug[c, j] *= inv_piv
         for r in range(d):
             if r != c:
                 f = aug[r, c]
                 if f != 0.0:
-                    for j in range(2 * d):
+                    for j in range(c, 2 * d):
                         aug[r, j] -= f * aug[c, j]
     for i in range(d):
         for j in range(d):
