@@ -302,7 +302,7 @@ def contact_step(
     F, z, S = assemble_lcp(quant, cone, h)
     Fnn = F[:, :nc, :nc]
     mu_n = smoothing.mu(z[:, :nc], Fnn)
-    mu = _expand_mu(mu_n, cone, h)
+    mu = expand_mu(mu_n, cone, h)
     jac = quant.has_derivatives
     options = {**CONTACT_SOLVER_DEFAULTS, **solver_options}
     unknown = set(options) - set(CONTACT_SOLVER_DEFAULTS) - {"tol"}
@@ -387,14 +387,14 @@ def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
     return ContactStepResult(q_next, v_next, empty, empty, np.ones(B, dtype=bool), lcp=None, **jac)
 
 
-def _expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
+def expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
     """Per-row mu (B, d) from per-contact mu (B, nc): friction and cone rows get mu / h."""
     mu = mu_n[:, cone.row_contact]
     mu[:, cone.sizes()[0] :] /= h
     return mu
 
 
-def _expand_dmu(dmu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
+def expand_dmu(dmu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
     """d mu_rows / d z_n (B, d, nc) from d mu_n / d z_n (B, nc, nc)."""
     dmu = dmu_n[:, cone.row_contact]
     dmu[:, cone.sizes()[0] :] /= h
@@ -417,7 +417,7 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing
             np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
             + np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
         )
-        dmu_rows = _expand_dmu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
+        dmu_rows = expand_dmu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
         dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
     dx = _chain_out(inner, quant.W, G, dlam, quant.N, quant.dN, v_next, h)  # (B, nq + nv, P)
     nx = nq + nv

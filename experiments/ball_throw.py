@@ -1,0 +1,387 @@
+"""Paper 000 section 8.3: learn the angle of a throw so that the ball ends up at a goal, with
+contact before the goal; learning curves of ZOPG, FOPG (exact), FOPG-BS and FOPG-ABS.
+
+The task (ours; the paper's Appendix C.2 illustration is not in the text we have): a ball of
+radius 5 cm and 1 kg is thrown from 1 m (its centre) at a fixed speed of 3 m/s; it lands
+inelastically on ground with Coulomb friction 0.4, slides and stops. The ball translates only
+(it is :class:`~drake_abs.box_lcs.TranslatingBox`: it slides, it does not roll). The policy is
+the throwing angle theta (rad above the horizontal); exploration is Gaussian on the angle,
+``a = theta + sigma xi``. The return is ``-(p_x(T) - goal)^2`` (m^2) at the end of the horizon,
+when the ball has come to rest; every throw lands well before the goal, so the contact (the
+landing impulse and the friction of the slide) decides where it stops.
+
+The throw fits the policy-gradient engine as a closed loop of H steps: the state carries a
+``held`` flag, 1 until the ball is released. :class:`ThrowPolicy` outputs ``theta * held``;
+:class:`ThrowStepper` releases the ball at the first step with velocity
+``speed (cos u, sin u)`` and from then on steps the ball's LCS, ignoring the input. So the
+exploration noise of later steps has no effect, and ZOPG's score reduces to the first step's.
+
+Estimators (drake_abs.estimators), each trained with Adam from the same initial angle and the
+same five seeds: ZOPG (likelihood ratio on the exact model), FOPG on the exact model, FOPG-BS
+(one fixed mu) and FOPG-ABS (contact-aware mu). Every run is evaluated each iteration by the
+deterministic return (no exploration) of the exact model, the true objective; the curves are
+that evaluation against iterations and against simulated steps.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drake_abs.box_lcs import TranslatingBox
+from drake_abs.estimators import PolicyObjective, first_order, zeroth_order
+from drake_abs.ipm import LCPConvergenceWarning
+from drake_abs.policy_rollout import LcsStepper, rollout_policy
+from drake_abs.rewards import QuadraticReward
+from drake_abs.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.training import Adam, train
+
+METHODS = ("ZOPG", "FOPG", "FOPG-BS", "FOPG-ABS")
+
+#: paper 000 section 8.3, the claims this experiment sets ours beside (no numbers are given).
+PAPER_CLAIMS = {
+    "bs_beats_zopg_and_fopg": "FOPG-BS: higher asymptotic return and faster convergence than "
+    "both ZOPG and vanilla FOPG",
+    "abs_beats_all": "FOPG-ABS: superior to all the other variants",
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """Sizes and parameters. Angles in rad, lengths in m, speeds in m/s, mu in m N s (larger mu
+    is more smoothing)."""
+
+    height: float = 1.0
+    speed: float = 3.0
+    radius: float = 0.05
+    mass: float = 1.0
+    friction: float = 0.4
+    time_step: float = 0.01
+    horizon: int = 150
+    goal: float = 1.5
+    angle0: float = 1.3
+    sigma: float = 0.05
+    rollouts: int = 32
+    iterations: int = 80
+    learning_rate: float = 0.02
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    bs_mu: float = 1e-5
+    abs_mu_max: float = 1e-3
+    abs_length: float = 0.02
+    methods: tuple[str, ...] = METHODS
+    landscape_points: int = 301
+
+    @classmethod
+    def test_size(cls) -> Config:
+        return cls(rollouts=8, iterations=12, learning_rate=0.03, seeds=(0, 1), landscape_points=41)
+
+
+@dataclass(frozen=True)
+class ThrowPolicy:
+    """``u = theta_0 * held``: the throwing angle while the ball is held, 0 afterwards.
+
+    State (5,): (p_x, p_z, v_x, v_z, held); one parameter, the angle (rad)."""
+
+    nx: int = 5
+    nu: int = 1
+    n_params: int = 1
+
+    def act(self, theta, x) -> np.ndarray:
+        return np.asarray(theta, float)[0] * np.asarray(x, float)[:, 4:5]
+
+    def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
+        x = np.asarray(x, float)
+        du_dx = np.zeros((len(x), 1, 5))
+        du_dx[:, 0, 4] = np.asarray(theta, float)[0]
+        return du_dx, x[:, None, 4:5].copy()
+
+    def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
+        x = np.asarray(x, float)
+        g_u = np.asarray(g_u, float)
+        g_x = np.zeros((len(x), 5))
+        g_x[:, 4] = g_u[:, 0] * np.asarray(theta, float)[0]
+        return g_x, g_u * x[:, 4:5]
+
+
+@dataclass(frozen=True)
+class ThrowStep:
+    """One batched throw step (the fields :class:`~drake_abs.policy_rollout.Stepper` needs)."""
+
+    x_next: np.ndarray
+    converged: np.ndarray
+    dx_dx: np.ndarray | None
+    dx_du: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class ThrowStepper:
+    """Releases a held ball at angle u with ``speed`` (m/s), then steps the ball's LCS.
+
+    State (M, 5) = (p_x, p_z, v_x, v_z, held); input (M, 1) = the angle, read only while held.
+    The release step moves nothing else: p+ = p, v+ = speed (cos u, sin u), held+ = 0."""
+
+    ball: LcsStepper
+    speed: float
+
+    def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True) -> ThrowStep:
+        M = x.shape[0]
+        held = x[:, 4] > 0.5
+        x_next = np.zeros((M, 5))
+        conv = np.ones(M, dtype=bool)
+        dx_dx = np.zeros((M, 5, 5)) if jacobians else None
+        dx_du = np.zeros((M, 5, 1)) if jacobians else None
+        a = u[held, 0]
+        x_next[held, :2] = x[held, :2]
+        x_next[held, 2] = self.speed * np.cos(a)
+        x_next[held, 3] = self.speed * np.sin(a)
+        free = ~held
+        if free.any():
+            r = self.ball.step(x[free, :4], np.zeros((int(free.sum()), 1)), jacobians=jacobians)
+            x_next[free, :4] = r.x_next
+            conv[free] = r.converged
+            if jacobians:
+                dx_dx[free, :4, :4] = r.dx_dx
+        if jacobians and held.any():
+            dx_dx[held, 0, 0] = dx_dx[held, 1, 1] = 1.0
+            dx_du[held, 2, 0] = -self.speed * np.sin(a)
+            dx_du[held, 3, 0] = self.speed * np.cos(a)
+        return ThrowStep(x_next, conv, dx_dx, dx_du)
+
+
+def ball(config: Config) -> TranslatingBox:
+    return TranslatingBox(
+        mass=config.mass, half_height=config.radius, friction=config.friction,
+        time_step=config.time_step,
+    )  # fmt: skip
+
+
+def smoothing_for(method: str, config: Config) -> SmoothingPolicy:
+    """The contact smoothing of each method's model (ZOPG and FOPG: exact)."""
+    if method == "FOPG-BS":
+        return Fixed(config.bs_mu)
+    if method == "FOPG-ABS":
+        return ContactAware(mu_max=config.abs_mu_max, length=config.abs_length)
+    return Exact()
+
+
+def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> PolicyObjective:
+    """The throw as a :class:`PolicyObjective` on the model smoothed by ``smoothing``."""
+    stepper = ThrowStepper(ball(config).stepper(smoothing), config.speed)
+    reward = QuadraticReward(
+        Q=np.zeros((5, 5)), R=np.zeros((1, 1)), x_goal=np.array([config.goal, 0, 0, 0, 0]),
+        Q_final=np.diag([1.0, 0, 0, 0, 0]),
+    )  # fmt: skip
+    x0 = np.array([0.0, config.height, 0.0, 0.0, 1.0])
+    return PolicyObjective(stepper, ThrowPolicy(), reward, x0, config.horizon, config.sigma)
+
+
+def true_return(config: Config, angles) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic return and resting position p_x(T) of throws at ``angles`` (exact model)."""
+    angles = np.atleast_1d(np.asarray(angles, float))
+    obj = objective(config)
+    x0 = np.tile(obj.x0, (angles.size, 1))
+    # one rollout per angle: the angle enters as the first step's (zero-policy) input noise
+    noise = np.zeros((angles.size, config.horizon, 1))
+    noise[:, 0, 0] = angles
+    r = rollout_policy(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
+                       sigma=1.0, gradient=False)  # fmt: skip
+    return r.returns, r.x[:, -1, 0]
+
+
+def landscape(config: Config, angles: np.ndarray) -> dict:
+    """p_x(T) and its pathwise derivative over ``angles`` for the exact, BS and ABS models."""
+    out = {}
+    for method in ("FOPG", "FOPG-BS", "FOPG-ABS"):
+        obj = objective(config, smoothing_for(method, config))
+        noise = np.zeros((angles.size, config.horizon, 1))
+        noise[:, 0, 0] = angles
+        x0 = np.tile(obj.x0, (angles.size, 1))
+        r = rollout_policy(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
+                           sigma=1.0, gradient=True)  # fmt: skip
+        # dJ/dtheta at theta = 0 with u_0 = angle: the angle's derivative of the return
+        out[method] = {"p_final": r.x[:, -1, 0].tolist(), "dreturn_dangle": r.grad[:, 0].tolist()}
+    return out
+
+
+def _estimator(method: str, config: Config):
+    obj = objective(config, smoothing_for(method, config))
+    if method == "ZOPG":
+        return lambda th, rng: zeroth_order(obj, th, rng, config.rollouts)
+    return lambda th, rng: first_order(obj, th, rng, config.rollouts)
+
+
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Train every method from every seed; write plots, summary.json and per-run logs."""
+    config = config or Config()
+    out = Path(out or "results/ball-throw")
+    out.mkdir(parents=True, exist_ok=True)
+    angles = np.linspace(-0.5, 1.5, config.landscape_points)
+    returns, p_final = true_return(config, angles)
+    best = int(np.argmax(returns))
+    curves, runs = {}, {}
+    start_all = time.perf_counter()
+    for method in config.methods:
+        estimator = _estimator(method, config)
+        evals, steps, unconverged, seconds, finals = [], [], 0, 0.0, []
+        for seed in config.seeds:
+            start = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted per row
+                run_ = train(
+                    estimator, np.array([config.angle0]), Adam(lr=config.learning_rate),
+                    config.iterations, seed=seed,
+                    evaluate=lambda th: float(true_return(config, th[0])[0][0]),
+                    log_dir=out / "runs", name=f"{method}_seed{seed}",
+                    config={"method": method, **asdict(config)}, progress=False,
+                )  # fmt: skip
+            seconds += time.perf_counter() - start
+            rows = run_.rows
+            evals.append([row["eval_return"] for row in rows])
+            per_iter = [row["rollouts"] * config.horizon for row in rows[:-1]]
+            steps.append(np.concatenate([[0], np.cumsum(per_iter)]).tolist())
+            unconverged += sum(row["unconverged_steps"] for row in rows[:-1])
+            finals.append(float(run_.theta[0]))
+        ev = np.array(evals)
+        curves[method] = {"eval_return": ev.tolist(), "simulated_steps": steps[0]}
+        runs[method] = {
+            "final_return_mean": float(ev[:, -1].mean()),
+            "final_return_std": float(ev[:, -1].std()),
+            "final_returns": ev[:, -1].tolist(),
+            "auc_per_seed": ev.mean(axis=1).tolist(),
+            "final_angle_mean": float(np.mean(finals)),
+            "final_angle_std": float(np.std(finals)),
+            "iterations_to_threshold": _iterations_to(ev, threshold=-1e-2),
+            "area_under_curve": float(ev.mean(axis=0).mean()),
+            "unconverged_steps": int(unconverged),
+            "seconds": seconds,
+        }
+    summary = {
+        "config": asdict(config),
+        "best_angle_on_grid": float(angles[best]),
+        "best_return_on_grid": float(returns[best]),
+        "initial_return": float(true_return(config, config.angle0)[0][0]),
+        "methods": runs,
+        "claims": _claims(runs),
+        "seconds": time.perf_counter() - start_all,
+    }
+    land = landscape(config, angles)
+    _plot(out, config, curves, angles, p_final, land)
+    (out / "curves.json").write_text(json.dumps(curves))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def _iterations_to(ev: np.ndarray, threshold: float) -> float | None:
+    """Mean over seeds of the first iteration whose evaluated return is >= threshold (None if a
+    seed never gets there)."""
+    hits = [np.flatnonzero(row >= threshold) for row in ev]
+    if any(h.size == 0 for h in hits):
+        return None
+    return float(np.mean([h[0] for h in hits]))
+
+
+def _better(runs: dict, a: str, b: str, key: str) -> bool:
+    """a beats b on ``key`` (per-seed values) by more than twice the standard error of the
+    difference of the means (seeds are independent runs)."""
+    x, y = np.array(runs[a][key]), np.array(runs[b][key])
+    se = np.sqrt(x.var(ddof=1) / x.size + y.var(ddof=1) / y.size) if x.size > 1 else 0.0
+    return bool(x.mean() - y.mean() > 2 * se)
+
+
+def _claims(runs: dict) -> dict:
+    """Our verdict on each of the paper's claims: a method is better when its final evaluated
+    return and its area under the curve (faster convergence) both beat the other's by more than
+    two standard errors over seeds."""
+    final = {m: r["final_return_mean"] for m, r in runs.items()}
+    auc = {m: r["area_under_curve"] for m, r in runs.items()}
+
+    def beats(a, others):
+        return all(_better(runs, a, b, "final_returns") and _better(runs, a, b, "auc_per_seed")
+                   for b in others)  # fmt: skip
+
+    out = {}
+    if {"ZOPG", "FOPG", "FOPG-BS"} <= set(runs):
+        out["bs_beats_zopg_and_fopg"] = {
+            "paper": PAPER_CLAIMS["bs_beats_zopg_and_fopg"],
+            "ours_final": final, "ours_auc": auc,
+            "agree": beats("FOPG-BS", ["ZOPG", "FOPG"]),
+        }  # fmt: skip
+    if "FOPG-ABS" in runs and len(runs) > 1:
+        out["abs_beats_all"] = {
+            "paper": PAPER_CLAIMS["abs_beats_all"],
+            "ours_final": final, "ours_auc": auc,
+            "agree": beats("FOPG-ABS", [m for m in runs if m != "FOPG-ABS"]),
+        }  # fmt: skip
+    return out
+
+
+def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    for method, c in curves.items():
+        ev = np.array(c["eval_return"])
+        mean, std = ev.mean(axis=0), ev.std(axis=0)
+        for ax, xs in zip(
+            axes, (np.arange(ev.shape[1]), np.array(c["simulated_steps"])), strict=True
+        ):
+            ax.plot(xs, mean, label=method)
+            ax.fill_between(xs, mean - std, mean + std, alpha=0.2)
+    axes[0].set(xlabel="iteration", ylabel="return  -(p_x(T) - goal)^2  (m^2)",
+                title=f"ball throw: mean and std over {len(config.seeds)} seeds")  # fmt: skip
+    axes[1].set(xlabel="simulated steps", ylabel="return (m^2)", title="against simulated steps")
+    for ax in axes:
+        ax.set_yscale("symlog", linthresh=1e-3)
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "learning_curves.png", dpi=120)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    names = {"FOPG": "exact", "FOPG-BS": f"BS mu={config.bs_mu:g}",
+             "FOPG-ABS": f"ABS mu_max={config.abs_mu_max:g}"}  # fmt: skip
+    for method, data in land.items():
+        axes[0].plot(angles, data["p_final"], label=names[method])
+        axes[1].plot(angles, data["dreturn_dangle"], label=names[method])
+    axes[0].axhline(config.goal, color="k", ls=":", label="goal")
+    axes[0].set(xlabel="throwing angle (rad)", ylabel="resting position p_x(T) (m)",
+                title="where the ball stops")  # fmt: skip
+    axes[1].set(xlabel="throwing angle (rad)", ylabel="d return / d angle (m^2/rad)",
+                title="pathwise derivative of the return")  # fmt: skip
+    for ax in axes:
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "landscape.png", dpi=120)
+    plt.close(fig)
+
+
+def report(summary: dict) -> str:
+    lines = [
+        "ball throw (paper 000 section 8.3): evaluated return -(p_x(T) - goal)^2 in m^2, "
+        f"mean +- std over seeds; best on the angle grid {summary['best_return_on_grid']:.2e} "
+        f"at {summary['best_angle_on_grid']:.3f} rad; start {summary['initial_return']:.3f}",
+    ]
+    for m, r in summary["methods"].items():
+        its = r["iterations_to_threshold"]
+        lines.append(
+            f"  {m:9s} final {r['final_return_mean']:+.2e} +- {r['final_return_std']:.1e}, "
+            f"angle {r['final_angle_mean']:.3f} +- {r['final_angle_std']:.3f} rad, "
+            f"iterations to -1e-2: {'never (some seed)' if its is None else f'{its:.1f}'}, "
+            f"unconverged steps {r['unconverged_steps']}, {r['seconds']:.1f} s"
+        )
+    for c in summary["claims"].values():
+        verdict = "agree" if c["agree"] else "DIFFERENT (not better by > 2 standard errors)"
+        lines.append(f"  paper: {c['paper']} -> ours {verdict}")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(report(run(Config.test_size(), "results/ball-throw-test")))
