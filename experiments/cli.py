@@ -17,6 +17,10 @@ from pathlib import Path
 STANDARD_EXPERIMENTS: dict[str, str] = {
     "box-convergence": "box_convergence",
     "mpc-quadcopter": "mpc_quadcopter",
+    "gradient-variance": "gradient_variance",
+    "bias-return": "bias_return",
+    "ball-throw": "ball_throw",
+    "smoothing-vs-rs": "smoothing_vs_rs",
 }
 EXPERIMENTS = ("bouncing-ball", "drake-comparison", *STANDARD_EXPERIMENTS)
 
