@@ -4,6 +4,7 @@ from drake_abs.systems.complementarity_plant import (
     ComplementarityPlant,
     ComplementarityPlant_,
     ComplementarityStepper,
+    StepOverflowWarning,
 )
 from drake_abs.systems.lcs_plant import LcsPlant, LcsPlant_
 from drake_abs.systems.point_visualizer import PointMassVisualizer
@@ -15,4 +16,5 @@ __all__ = [
     "LcsPlant",
     "LcsPlant_",
     "PointMassVisualizer",
+    "StepOverflowWarning",
 ]

@@ -8,6 +8,7 @@ follows the contacts in play, not the size of the model.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,11 @@ from drake_abs.lcs import GradientMode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 from drake_abs.systems import autodiff
 from drake_abs.systems.multibody_quantities import ContactModelBase
+
+
+class StepOverflowWarning(UserWarning):
+    """A step from a finite state gave a non-finite next state or Jacobian (e.g. explicit
+    Coriolis terms at very large joint velocities); its ``converged`` flag is False."""
 
 
 @dataclass(frozen=True)
@@ -144,6 +150,19 @@ class ComplementarityStepper:
             )  # fmt: skip
             self._scatter(out, rows, idx, cone, r, jacobians)
             quant = None
+        finite = np.isfinite(out["x_next"]).all(axis=1)
+        if jacobians:
+            finite &= np.isfinite(out["dx_dx"]).all(axis=(1, 2))
+            finite &= np.isfinite(out["dx_du"]).all(axis=(1, 2))
+        if not finite.all():  # the dynamics overflowed (not the LCP): flag, never pass as valid
+            out["converged"] &= finite
+            warnings.warn(
+                f"{int((~finite).sum())} of {B} step(s) overflowed to a non-finite state or "
+                f"Jacobian (largest |x| in: {float(np.abs(x[~finite]).max()):.3g}); their "
+                "`converged` flags are False",
+                StepOverflowWarning,
+                stacklevel=2,
+            )
         return RigidStepResult(active=active, **out)
 
     def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:

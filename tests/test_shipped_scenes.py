@@ -13,14 +13,16 @@ flight phase's step map, its floating-base modes aside, below 1).
 """
 
 import functools
+import warnings
 
 import numpy as np
 import pytest
 from numdiff import central_difference
 
-from drake_abs import ContactAware, Exact
+from drake_abs import ContactAware, Exact, Fixed
 from drake_abs.contact_lcp import contact_step
 from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
+from drake_abs.ipm import LCPConvergenceWarning
 from drake_abs.scene import Scene
 from drake_abs.systems import ComplementarityStepper
 
@@ -314,3 +316,37 @@ def test_step_jacobian_matches_finite_differences(name, label, policy):
     fd = central_difference(step, np.concatenate([x, u]), eps=1e-7)
     analytic = np.concatenate([r.dx_dx[0], r.dx_du[0]], axis=1)
     np.testing.assert_allclose(analytic, fd, atol=1e-6 * (1 + np.abs(fd).max()))
+
+
+def test_overflowing_dynamics_are_flagged_not_passed_as_converged():
+    """The half-cheetah has no joint damping or limits: under large random torques its light feet
+    spin up and the explicit Coriolis terms diverge (measured: |x| ~ 1e26 within 20 steps). A
+    step that overflows must come back flagged, with a warning, not as a converged result."""
+    from drake_abs.systems import StepOverflowWarning
+
+    scene = Scene.from_yaml(PACKAGE_DIR / "scenes" / "half_cheetah.yaml")
+    sm = build_scene_model(scene)
+    stepper = ComplementarityStepper(
+        sm.contact_model, Fixed(1e-2), activation_distance=scene.activation_distance
+    )
+    rng = np.random.default_rng(0)
+    x = np.tile(np.concatenate([sm.q0, sm.v0]), (4, 1))
+    flagged = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LCPConvergenceWarning)
+        warnings.simplefilter("error", StepOverflowWarning)
+        for _ in range(100):
+            u = 20.0 * rng.standard_normal((4, stepper.sizes[2]))
+            try:
+                r = stepper.step(x, u, jacobians=True)
+            except StepOverflowWarning:
+                flagged = True
+                break
+            assert np.isfinite(r.x_next).all() or not r.converged.all()
+            x = np.where(np.isfinite(r.x_next), r.x_next, x)
+    assert flagged
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = stepper.step(x, u, jacobians=True)
+    bad = ~np.isfinite(r.x_next).all(axis=1) | ~np.isfinite(r.dx_dx).all(axis=(1, 2))
+    assert bad.any() and not r.converged[bad].any()
