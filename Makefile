@@ -27,6 +27,10 @@ format: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_lcp.py
+	$(PY) benchmarks/bench_scenes.py
+	$(PY) benchmarks/bench_policy_gradient.py --json results/bench_policy_gradient.json
+	$(PY) benchmarks/bench_variance.py
+	$(PY) benchmarks/bench_mpc.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache .ruff_cache
