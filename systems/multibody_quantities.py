@@ -142,6 +142,8 @@ class ContactModelBase(ABC):
         ``derivatives=False``. ``kinematics``: a provider's own kinematics of a one-state batch,
         already evaluated at q (see :meth:`quantities_within`)."""
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
+        if kinematics is not None and len(q) != 1:
+            raise ValueError(f"kinematics belong to one state; got a batch of {len(q)}")
         per_state = [
             self._one(qb, vb, ub, active, derivatives, kinematics)
             for qb, vb, ub in zip(q, v, u, strict=True)
