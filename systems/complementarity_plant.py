@@ -132,7 +132,9 @@ class ComplementarityStepper:
                 dn_dx=np.zeros((B, nc, nq + nv)),
                 dn_du=np.zeros((B, nc, nu)),
             )
-        if B == 1 or (active == active[0]).all():  # one active set: one batched LCP
+        if B == 0:  # an empty batch: empty outputs
+            groups = []
+        elif B == 1 or (active == active[0]).all():  # one active set: one batched LCP
             groups = [(slice(None), np.flatnonzero(active[0]))]
         else:  # states with the same active set share one batched LCP
             masks, group = np.unique(active, axis=0, return_inverse=True)

@@ -228,6 +228,7 @@ class PinocchioContactModel(ContactModelBase):
         dv_free[:, nq + nv :] = h * W @ self.B_act
         fm, fd = self._free_model, self._free_data
         zero = np.zeros(nv)
+        q = q.copy()  # held by dW_times, evaluated after the LCP solve
 
         def dW_times(f: np.ndarray) -> np.ndarray:  # (nv,) -> (nv, P): d(W f) = -W dM (W f)
             dW_f = np.zeros((nv, P))

@@ -350,3 +350,13 @@ def test_overflowing_dynamics_are_flagged_not_passed_as_converged():
         r = stepper.step(x, u, jacobians=True)
     bad = ~np.isfinite(r.x_next).all(axis=1) | ~np.isfinite(r.dx_dx).all(axis=(1, 2))
     assert bad.any() and not r.converged[bad].any()
+
+
+def test_an_empty_batch_gives_empty_results():
+    scene = Scene.from_yaml(PACKAGE_DIR / "scenes" / "box_push.yaml")
+    sm = build_scene_model(scene)
+    stepper = ComplementarityStepper(sm.contact_model, activation_distance=0.1)
+    nq, nv, nu, nc = stepper.sizes
+    r = stepper.step(np.zeros((0, nq + nv)), np.zeros((0, nu)))
+    assert r.x_next.shape == (0, nq + nv) and r.dx_dx.shape == (0, nq + nv, nq + nv)
+    assert r.normal_impulse.shape == (0, nc) and r.converged.shape == (0,)
