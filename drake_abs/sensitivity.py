@@ -71,53 +71,34 @@ def implicit_jacobians(
         ``(dlam_dq, dlam_dmu)``, each (B, d, d); ``dlam_dmu`` is with respect to a per-contact mu
         (sum its last axis for the derivative with respect to one scalar mu).
     """
-    d = lam.shape[-1]
-    if lam.ndim == 2 and d <= _COMPILED_UP_TO:  # a batch of small problems: compiled
-        F3 = np.ascontiguousarray(F[None] if F.ndim == 2 else F, dtype=float)
-        dq, dmu, ok = _implicit_small(F3, F.ndim == 2, lam, slack)
-        if not ok.all():  # singular Newton matrices: the pseudo-inverse path below
-            bad = ~ok
-            Kinv, w = equilibrated_newton_inverse(
-                F if F.ndim == 2 else F[bad], lam[bad], slack[bad]
-            )
-            dq[bad] = -Kinv * (lam[bad] * w)[..., None, :]
-            dmu[bad] = Kinv * w[..., None, :]
-        return dq, dmu
     Kinv, w = equilibrated_newton_inverse(F, lam, slack)
     return -Kinv * (lam * w)[..., None, :], Kinv * w[..., None, :]
 
 
-#: Largest d whose Jacobians use the compiled Gauss-Jordan inverse (LAPACK above).
+#: Largest d whose equilibrated inverse is compiled (Gauss-Jordan); LAPACK above.
 _COMPILED_UP_TO = 32
 
 
 @nb.njit(cache=True)
-def _implicit_small(F3, shared, lam, slack):
-    """:func:`implicit_jacobians` for a batch of small problems (F3 (1 or B, d, d)): the same
-    equilibrated matrix ``diag(w) K``, inverted by Gauss-Jordan with partial pivoting; ``ok``
-    (B,) is False where it is singular (those rows are left for the pseudo-inverse path)."""
+def _equilibrated_inverse_small(F3, shared, lam, slack):
+    """``(diag(w) K)^-1`` (B, d, d) and w (B, d) for a batch of small problems (F3 (1 or B, d,
+    d)) by Gauss-Jordan with partial pivoting; ``ok`` (B,) is False where the matrix is
+    singular (those rows are left to the pseudo-inverse path)."""
     B, d = lam.shape
-    dq = np.zeros((B, d, d))
-    dmu = np.zeros((B, d, d))
+    out = np.zeros((B, d, d))
+    w = np.empty((B, d))
     ok = np.ones(B, dtype=np.bool_)
     K = np.empty((d, d))
-    inv = np.empty((d, d))
     aug = np.empty((d, 2 * d))
-    w = np.empty(d)
     for b in range(B):
         F = F3[0] if shared else F3[b]
         for i in range(d):
-            w[i] = 1.0 / (slack[b, i] + lam[b, i])
+            w[b, i] = 1.0 / (slack[b, i] + lam[b, i])
             for j in range(d):
-                K[i, j] = lam[b, i] * w[i] * F[i, j]
-            K[i, i] += slack[b, i] * w[i]
-        ok[b] = _invert(K, inv, aug)
-        if ok[b]:
-            for i in range(d):
-                for j in range(d):
-                    dq[b, i, j] = -inv[i, j] * lam[b, j] * w[j]
-                    dmu[b, i, j] = inv[i, j] * w[j]
-    return dq, dmu, ok
+                K[i, j] = lam[b, i] * w[b, i] * F[i, j]
+            K[i, i] += slack[b, i] * w[b, i]
+        ok[b] = _invert(K, out[b], aug)
+    return out, w, ok
 
 
 def equilibrated_newton_inverse(
@@ -129,16 +110,31 @@ def equilibrated_newton_inverse(
     (lam >> s), so partial pivoting stays reliable when ``s / lam`` spans many decades. Returns
     ``((diag(w) K)^-1, w)``; then ``K^-1 = (diag(w) K)^-1 diag(w)``. Shapes (B, d, d), (B, d).
     """
+    d = lam.shape[-1]
+    if lam.ndim == 2 and d <= _COMPILED_UP_TO:  # a batch of small problems: compiled
+        F3 = np.ascontiguousarray(F[None] if F.ndim == 2 else F, dtype=float)
+        Kinv, w, ok = _equilibrated_inverse_small(F3, F.ndim == 2, lam, slack)
+        if not ok.all():  # singular: the pseudo-inverse path below, for those rows only
+            bad = ~ok
+            Fb = F if F.ndim == 2 else F[bad]
+            Kinv[bad] = _equilibrated_inverse_numpy(Fb, lam[bad], slack[bad], w[bad])
+        return Kinv, w
     w = 1.0 / (slack + lam)
+    return _equilibrated_inverse_numpy(F, lam, slack, w), w
+
+
+def _equilibrated_inverse_numpy(F, lam, slack, w) -> np.ndarray:
+    """``(diag(w) K)^-1`` by :func:`batched_inverse` (closed form at d = 1, pseudo-inverse
+    where singular)."""
     if lam.shape[-1] == 1:  # one contact: a scalar per problem
         Fd = F[..., 0, :] if F.ndim == lam.ndim + 1 else F[0]
         with np.errstate(divide="ignore"):
             inv = 1.0 / ((slack + lam * Fd) * w)
-        return np.where(np.isfinite(inv), inv, 0.0)[..., None], w  # pseudo-inverse of 0 is 0
+        return np.where(np.isfinite(inv), inv, 0.0)[..., None]  # pseudo-inverse of 0 is 0
     K = F * (lam * w)[..., :, None]
     idx = np.arange(lam.shape[-1])
     K[..., idx, idx] += slack * w
-    return batched_inverse(K), w
+    return batched_inverse(K)
 
 
 def dlam_dF(dlam_dq: np.ndarray, lam: np.ndarray) -> np.ndarray:

@@ -106,13 +106,14 @@ class ComplementarityStepper:
             raise ValueError("x and u must be finite")
         q, v = x[:, :nq], x[:, nq:]
         pruned = np.isfinite(self.activation_distance)
-        quant = None
+        groups = None  # (rows, active contact indices, quantities or None) per active set
         if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
             idx, quant = self.model.quantities_within(
                 q, v, u, self.activation_distance, derivatives=jacobians
             )
             active = np.zeros((1, nc), dtype=bool)
             active[0, idx] = True
+            groups = [(slice(None), idx, quant)]
         elif pruned:
             active = self.model.distances(q) <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
@@ -132,17 +133,9 @@ class ComplementarityStepper:
                 dn_dx=np.zeros((B, nc, nq + nv)),
                 dn_du=np.zeros((B, nc, nu)),
             )
-        if B == 0:  # an empty batch: empty outputs
-            groups = []
-        elif B == 1 or (active == active[0]).all():  # one active set: one batched LCP
-            groups = [(slice(None), np.flatnonzero(active[0]))]
-        else:  # states with the same active set share one batched LCP
-            masks, group = np.unique(active, axis=0, return_inverse=True)
-            groups = [
-                (np.flatnonzero(group.ravel() == g), np.flatnonzero(mask))
-                for g, mask in enumerate(masks)
-            ]
-        for rows, idx in groups:
+        if groups is None:
+            groups = _groups_by_active_set(active)
+        for rows, idx, quant in groups:
             if quant is None:
                 quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
             cone = self.model.cone_for(idx)
@@ -151,7 +144,6 @@ class ComplementarityStepper:
                 **self.solver_options,
             )  # fmt: skip
             self._scatter(out, rows, idx, cone, r, jacobians)
-            quant = None
         finite = np.isfinite(out["x_next"]).all(axis=1)
         if jacobians:
             finite &= np.isfinite(out["dx_dx"]).all(axis=(1, 2))
@@ -196,6 +188,20 @@ class ComplementarityStepper:
                 out[key][:, cols] = value
             else:
                 out[key][np.ix_(rows, cols)] = value
+
+
+def _groups_by_active_set(active: np.ndarray) -> list[tuple]:
+    """``(rows, active contact indices, None)`` per distinct row of ``active`` (B, nc): states
+    with the same active set share one batched LCP (rows is a slice when all of them do)."""
+    if active.shape[0] == 0:
+        return []
+    if (active == active[0]).all():
+        return [(slice(None), np.flatnonzero(active[0]), None)]
+    masks, group = np.unique(active, axis=0, return_inverse=True)
+    return [
+        (np.flatnonzero(group.ravel() == g), np.flatnonzero(mask), None)
+        for g, mask in enumerate(masks)
+    ]
 
 
 @TemplateSystem.define("ComplementarityPlant_", T_list=[float, AutoDiffXd])
