@@ -22,6 +22,12 @@ the batch):
    ``sigma = (mu_aff / mu_cur)^3``: the duality measure is never driven below the requested mu.
 3. Once a contact reaches its target, its Newton target is exactly ``mu_i`` (no second-order
    correction): pure centering steps converge quadratically onto the central-path point.
+4. Step length: a fraction ``tau`` of the step to the boundary of the positive orthant, 0.995
+   by default. Near the solution (the Newton step nearly full, ``a_max >= 0.9``) the fraction
+   follows the gap being closed, ``1 - tau = max(mu_cur, 1e-10)``, so that the gap shrinks
+   quadratically rather than at most 200x per iteration (exact solves: 13.8 -> 9.5 iterations
+   on the box benchmark's problems); that longer step is kept only if it passes the tests
+   below and leaves every ``lam_i s_i`` at least half its target.
 
 Safeguards: steps keep the contacts still driving down in the wide neighbourhood
 ``lam_i s_i >= 1e-3 mean`` (backtracking), and a problem whose duality measure stalls drops the

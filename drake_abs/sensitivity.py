@@ -72,7 +72,8 @@ def implicit_jacobians(
         (sum its last axis for the derivative with respect to one scalar mu).
     """
     Kinv, w = equilibrated_newton_inverse(F, lam, slack)
-    return -Kinv * (lam * w)[..., None, :], Kinv * w[..., None, :]
+    dlam_dmu = Kinv * w[..., None, :]  # K^-1 = (diag(w) K)^-1 diag(w)
+    return dlam_dmu * -lam[..., None, :], dlam_dmu
 
 
 #: Largest d whose equilibrated inverse is compiled (Gauss-Jordan); LAPACK above.
