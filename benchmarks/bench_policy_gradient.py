@@ -5,7 +5,9 @@ linear policy, and the gradient of the mean return with respect to the policy's 
 
 - Ours: the box as a constant-matrix LCS (:class:`drake_abs.box_lcs.TranslatingBox`, ABS
   contact-aware smoothing), all M rollouts batched, the gradient by the adjoint pass
-  (:func:`drake_abs.estimators.first_order`).
+  (:func:`drake_abs.estimators.first_order`). The box never leaves the ground, so every
+  contact is active and ABS asks for mu = mu_min = 0: each of the M H steps is an exact
+  frictional LCP (4 rows), solved to the solver's default accuracy.
 - Drake: the same box (1 kg, 0.4 x 0.2 x 0.2 m, prismatic x and z joints, friction 0.5, one
   contact point at the bottom, h = 0.01 s) as a discrete MultibodyPlant with SAP
   (:func:`drake_abs.diagrams.drake_twin.make_drake_twin`), closed with the same policy, noise
