@@ -304,7 +304,7 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
             sigma = 0.0
             if mu_cur > 0.0:
                 ratio = min(mu_aff / mu_cur, 1.0)
-                sigma = ratio * ratio * ratio if ratio > 1e-60 else 0.0
+                sigma = ratio * ratio * ratio
             # safeguard: drop Mehrotra's correction once the measure stalls (it can cycle)
             if mu_cur > 0.5 * best_mu:
                 stalls += 1
