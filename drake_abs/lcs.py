@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-import numba as nb
 import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
@@ -167,7 +166,10 @@ class LCS:
             dmu_dz = smoothing.dmu_dz(z, self.F) if gradient == "total" else None
             if dmu_dz is not None:
                 dlam_dz = dlam_dz + lcp.dlam_dmu @ dmu_dz
-            dlam_dx, dlam_du, dx_dx, dx_du = _chain(self.A, self.B, self.C, self.D, self.E, dlam_dz)
+            dlam_dx = dlam_dz @ self.D
+            dlam_du = dlam_dz @ self.E
+            dx_dx = self.A + self.C @ dlam_dx
+            dx_du = self.B + self.C @ dlam_du
             if dmu_dz is None:
                 dmu_dx = np.zeros(dlam_dx.shape)
                 dmu_du = np.zeros(dlam_du.shape)
@@ -176,40 +178,6 @@ class LCS:
             jac = [dx_dx, dx_du, dlam_dx, dlam_du, dmu_dx, dmu_du]
         out = StepResult(x_next, lcp.lam, lcp.mu, lcp.converged, *jac, lcp=lcp)
         return _first(out) if single else out
-
-
-@nb.njit(cache=True)
-def _chain(A, B, C, D, E, dlam_dz):
-    """The step's chain rule for a batch, compiled (numpy's stacked matmul is slow for small
-    matrices): ``dlam_dx = dlam_dz D``, ``dlam_du = dlam_dz E``, ``dx_dx = A + C dlam_dx``,
-    ``dx_du = B + C dlam_du``; dlam_dz is (N, d, d)."""
-    N, d = dlam_dz.shape[0], dlam_dz.shape[1]
-    nx, nu = A.shape[0], B.shape[1]
-    dlam_dx = np.zeros((N, d, nx))
-    dlam_du = np.zeros((N, d, nu))
-    dx_dx = np.empty((N, nx, nx))
-    dx_du = np.empty((N, nx, nu))
-    for n in range(N):
-        for i in range(d):
-            for k in range(d):
-                g = dlam_dz[n, i, k]
-                if g != 0.0:
-                    for j in range(nx):
-                        dlam_dx[n, i, j] += g * D[k, j]
-                    for j in range(nu):
-                        dlam_du[n, i, j] += g * E[k, j]
-        for r in range(nx):
-            for j in range(nx):
-                acc = A[r, j]
-                for i in range(d):
-                    acc += C[r, i] * dlam_dx[n, i, j]
-                dx_dx[n, r, j] = acc
-            for j in range(nu):
-                acc = B[r, j]
-                for i in range(d):
-                    acc += C[r, i] * dlam_du[n, i, j]
-                dx_du[n, r, j] = acc
-    return dlam_dx, dlam_du, dx_dx, dx_du
 
 
 def _first(r: StepResult) -> StepResult:
