@@ -49,7 +49,7 @@ import numba as nb
 import numpy as np
 
 from drake_abs.ipm import LCPResult, check_solver_options, solve_lcp_trusted
-from drake_abs.lcs import GradientMode
+from drake_abs.lcs import GradientMode, check_gradient_mode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 
 #: Solver defaults for contact steps. Sticking makes the linearised-cone LCP degenerate
@@ -286,8 +286,7 @@ def contact_step(
     :func:`drake_abs.solve_lcp` (tol, max_iterations, exact_tol; defaults in
     :data:`CONTACT_SOLVER_DEFAULTS`).
     """
-    if gradient not in ("frozen", "total"):
-        raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+    check_gradient_mode(gradient)
     if not (np.isfinite(h) and h > 0):
         raise ValueError(f"h must be a finite number > 0; got {h!r}")
     smoothing = Exact() if smoothing is None else smoothing

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_abs.estimators import GradientEstimate, PolicyObjective, first_order, zeroth_order
-from drake_abs.lcs import GradientMode
+from drake_abs.lcs import GradientMode, check_gradient_mode
 from drake_abs.smoothing import Exact, Fixed, SmoothingPolicy
 
 #: ``estimator(theta, rng) -> GradientEstimate``: one estimate, all randomness from ``rng``.
@@ -396,8 +396,7 @@ def variance_bias_sweep(
     if not hs:
         raise ValueError("horizons must contain at least one horizon")
     for mode in modes:
-        if mode not in ("frozen", "total"):
-            raise ValueError(f"modes must be 'frozen' or 'total'; got {mode!r}")
+        check_gradient_mode(mode, "modes")
     estimator = estimator or fopg(64)
     theta = np.asarray(theta, dtype=float)
     root = _seed_sequence(seed)

@@ -21,6 +21,12 @@ from drake_abs.smoothing import Exact, SmoothingPolicy
 GradientMode = Literal["frozen", "total"]
 
 
+def check_gradient_mode(gradient, name: str = "gradient") -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``gradient`` is ``"frozen"`` or ``"total"``."""
+    if gradient not in ("frozen", "total"):
+        raise ValueError(f"{name} must be 'frozen' or 'total'; got {gradient!r}")
+
+
 @dataclass(frozen=True)
 class StepResult:
     """One batched LCS step. Shapes for a batch of B (no leading axis for a single state).
@@ -151,8 +157,7 @@ class LCS:
             jacobians: compute dx+/dx, dx+/du and the lam and mu Jacobians.
             strict: raise instead of warning when the LCP solve does not converge.
         """
-        if gradient not in ("frozen", "total"):
-            raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+        check_gradient_mode(gradient)
         smoothing = Exact() if smoothing is None else smoothing
         X, U, single = self._inputs(x, u)
         z = self.contact_distance(X, U)

@@ -17,7 +17,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_abs.contact_lcp import contact_step
-from drake_abs.lcs import GradientMode
+from drake_abs.lcs import GradientMode, check_gradient_mode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 from drake_abs.systems import autodiff
 from drake_abs.systems.multibody_quantities import ContactModelBase
@@ -76,8 +76,7 @@ class ComplementarityStepper:
         activation_distance: float = float("inf"),
         **solver_options,
     ):
-        if gradient not in ("frozen", "total"):
-            raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+        check_gradient_mode(gradient)
         self.model = model
         self.smoothing = Exact() if smoothing is None else smoothing
         self.gradient = gradient

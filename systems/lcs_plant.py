@@ -12,7 +12,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs.lcs import LCS, GradientMode
+from drake_abs.lcs import LCS, GradientMode, check_gradient_mode
 from drake_abs.smoothing import Exact, SmoothingPolicy
 from drake_abs.systems import autodiff
 
@@ -54,8 +54,7 @@ def LcsPlant_(T):
             LeafSystem_[T].__init__(self, converter)
             if not (np.isfinite(time_step) and time_step > 0):
                 raise ValueError(f"time_step must be a finite number > 0; got {time_step!r}")
-            if gradient not in ("frozen", "total"):
-                raise ValueError(f"gradient must be 'frozen' or 'total'; got {gradient!r}")
+            check_gradient_mode(gradient)
             self.lcs = lcs
             self.time_step = float(time_step)
             self.smoothing = Exact() if smoothing is None else smoothing

@@ -266,7 +266,8 @@ class MultibodyContactModel(ContactModelBase):
         Jn, dJn = _split(e["Jn"], P)
         Jt, dJt = _split(e["Jt"], P) if e["Jt"].size else (np.zeros((0, nv)), np.zeros((0, nv, P)))
         W = np.linalg.inv(M)
-        dW = -np.moveaxis(W @ np.moveaxis(dM, -1, 0) @ W, 0, -1)  # d(M^-1) = -W dM W
+        dW = np.zeros((nv, nv, P))  # d(M^-1) = -W dM W; M depends on q only
+        dW[..., :nq] = -np.moveaxis(W @ np.moveaxis(dM[..., :nq], -1, 0) @ W, 0, -1)
         dv_free = np.zeros((nv, P))
         dv_free[:, nq : nq + nv] = np.eye(nv)
         dv_free += h * (np.einsum("ijp,j->ip", dW, tau) + W @ dtau)
