@@ -62,6 +62,14 @@ class PerContactSmoothing(SmoothingPolicy):
     cone: FrictionCone
     time_step: float
 
+    @property
+    def is_constant(self) -> bool:
+        return self.contact.is_constant
+
+    @property
+    def is_exact(self) -> bool:
+        return self.contact.is_exact
+
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         nc = self.cone.sizes()[0]
         mu_n = self.contact.mu(z[..., :nc], F[..., :nc, :nc])

@@ -42,7 +42,7 @@ import numpy as np
 
 from drake_abs.estimators import GradientEstimate, PolicyObjective, first_order, zeroth_order
 from drake_abs.lcs import GradientMode, check_gradient_mode
-from drake_abs.smoothing import Exact, Fixed, SmoothingPolicy
+from drake_abs.smoothing import Exact, SmoothingPolicy
 
 #: ``estimator(theta, rng) -> GradientEstimate``: one estimate, all randomness from ``rng``.
 Estimator = Callable[[np.ndarray, np.random.Generator], GradientEstimate]
@@ -259,9 +259,7 @@ def reference_gradient(
             f"method must be 'combined', 'first_order' or 'zeroth_order'; got {method!r}"
         )
     smoothing = getattr(exact.stepper, "smoothing", None)
-    if smoothing is not None and not (
-        isinstance(smoothing, Exact) or (isinstance(smoothing, Fixed) and smoothing.value == 0)
-    ):
+    if smoothing is not None and not smoothing.is_exact:
         raise ValueError(f"exact must be the hard-contact objective (Exact()); got {smoothing!r}")
     K = _check_int(batches, "batches", 2)
     n = _check_int(samples, "samples", 2 * K)
@@ -345,12 +343,6 @@ def fopg(samples: int) -> ObjectiveEstimator:
     return lambda obj, theta, rng: first_order(obj, theta, rng, m)
 
 
-def is_constant(policy: SmoothingPolicy) -> bool:
-    """True for policies whose mu does not depend on the state (Exact, Fixed): their
-    ``frozen`` and ``total`` gradients coincide."""
-    return isinstance(policy, Exact | Fixed)
-
-
 def variance_bias_sweep(
     make_objective: Callable[[SmoothingPolicy, GradientMode, int], PolicyObjective],
     theta,
@@ -414,7 +406,7 @@ def variance_bias_sweep(
             )
         for name, policy in policies.items():
             for i, mode in enumerate(modes):
-                if is_constant(policy) and i > 0:
+                if policy.is_constant and i > 0:
                     continue
                 obj = make_objective(policy, mode, H)
                 stats = measure_variance(
@@ -424,7 +416,7 @@ def variance_bias_sweep(
                     seed=_child(root, H, 0),
                 )
                 row = {"policy": name, "mode": mode, "horizon": H}
-                row["modes_coincide"] = is_constant(policy)
+                row["modes_coincide"] = policy.is_constant
                 row.update({k: v for k, v in stats.to_dict().items() if k != "mean_grad"})
                 if ref is not None:
                     row["bias"] = measure_bias(stats, ref).to_dict()

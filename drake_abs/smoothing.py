@@ -53,10 +53,24 @@ class SmoothingPolicy(ABC):
         """Derivative of :meth:`mu` with respect to z, (B, d, d). Zero for constant policies."""
         return np.zeros(z.shape + z.shape[-1:])
 
+    @property
+    def is_constant(self) -> bool:
+        """True when mu does not depend on the state: ``frozen`` and ``total`` gradients
+        coincide."""
+        return False
+
+    @property
+    def is_exact(self) -> bool:
+        """True when mu = 0 for every state (hard contact)."""
+        return False
+
 
 @dataclass(frozen=True)
 class Exact(SmoothingPolicy):
     """Hard contact: ``mu = 0`` (the solver stops at its exact floor, see ``solve_lcp``)."""
+
+    is_constant = True
+    is_exact = True
 
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return np.zeros_like(z)
@@ -73,6 +87,12 @@ class Fixed(SmoothingPolicy):
 
     def __post_init__(self):
         _check_positive(self.value, "Fixed.value", allow_zero=True)
+
+    is_constant = True
+
+    @property
+    def is_exact(self) -> bool:
+        return self.value == 0
 
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return np.full_like(z, self.value)

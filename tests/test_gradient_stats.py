@@ -189,3 +189,25 @@ def test_bad_input_is_named():
         variance_bias_sweep(make, THETA, {"e": Exact()}, (1,), batches=2, seed=0, modes=("x",))
     with pytest.raises(ValueError, match="horizons"):
         variance_bias_sweep(make, THETA, {"e": Exact()}, (0,), batches=2, seed=0)
+
+
+def test_exactness_and_constancy_are_asked_of_the_policy_not_its_class():
+    """A wrapped policy (the box's per-contact rows) answers for the policy it wraps: the exact
+    box objective is accepted as a reference, a smoothed one is refused."""
+    from drake_abs.box_lcs import TranslatingBox
+    from drake_abs.smoothing import ContactAware
+
+    box = TranslatingBox(mass=1.0, half_height=0.1, friction=0.5, time_step=0.01)
+    assert box.smoothing().is_exact and box.smoothing().is_constant
+    assert box.smoothing(Fixed(1e-3)).is_constant and not box.smoothing(Fixed(1e-3)).is_exact
+    assert not box.smoothing(ContactAware(1e-3, 0.02)).is_constant
+    policy = LinearPolicy(4, 1)
+    reward = QuadraticReward(Q=np.eye(4), R=0.01 * np.eye(1), x_goal=np.zeros(4))
+    x0 = box.resting_state()
+    theta = np.zeros(policy.n_params)
+    exact = PolicyObjective(box.stepper(), policy, reward, x0, 5, 1.0)
+    ref = reference_gradient(exact, theta, samples=8, batches=2, seed=0)
+    assert np.all(np.isfinite(ref.grad))
+    smoothed = PolicyObjective(box.stepper(Fixed(1e-3)), policy, reward, x0, 5, 1.0)
+    with pytest.raises(ValueError, match="hard-contact"):
+        reference_gradient(smoothed, theta, samples=8, batches=2, seed=0)
