@@ -72,13 +72,17 @@ def rollout(
     mus = np.empty((nb, n, nc))
     conv = np.empty((nb, n), dtype=bool)
     xs[:, 0] = X
-    Jx = np.broadcast_to(np.eye(nx), (nb, nx, nx)).copy() if jacobians else None
-    Ju = np.zeros((nb, n, nx, nu)) if jacobians else None
+    Fx = np.empty((nb, n, nx, nx)) if jacobians else None
+    Ju = np.empty((nb, n, nx, nu)) if jacobians else None
     for t in range(n):
         r = lcs.step(xs[:, t], U[:, t], smoothing, gradient=gradient, jacobians=jacobians)
         xs[:, t + 1], lams[:, t], mus[:, t], conv[:, t] = r.x_next, r.lam, r.mu, r.converged
         if jacobians:
-            Jx = r.dx_dx @ Jx
-            Ju[:, :t] = r.dx_dx[:, None] @ Ju[:, :t]
-            Ju[:, t] = r.dx_du
+            Fx[:, t], Ju[:, t] = r.dx_dx, r.dx_du
+    Jx = None
+    if jacobians:  # one backward sweep: P = dx_N / dx_{t+1}, so dx_N / du_t = P dx_{t+1} / du_t
+        Jx = np.broadcast_to(np.eye(nx), (nb, nx, nx)).copy()
+        for t in range(n - 1, -1, -1):
+            Ju[:, t] = Jx @ Ju[:, t]
+            Jx = Jx @ Fx[:, t]
     return Rollout(xs, lams, mus, conv, Jx, Ju)
