@@ -36,7 +36,6 @@ from drake_abs.contact_lcp import (
     FrictionCone,
     StepQuantities,
     assemble_lcp,
-    expand_dmu,
     expand_mu,
 )
 from drake_abs.lcs import LCS, GradientMode
@@ -80,7 +79,7 @@ class PerContactSmoothing(SmoothingPolicy):
         Z = np.atleast_2d(z)
         dmu_n = self.contact.dmu_dz(Z[:, :nc], F[..., :nc, :nc])
         out = np.zeros(Z.shape + Z.shape[-1:])
-        out[:, :, :nc] = expand_dmu(dmu_n, self.cone, self.time_step)
+        out[:, :, :nc] = expand_mu(dmu_n, self.cone, self.time_step)
         return out.reshape(z.shape + z.shape[-1:])
 
 

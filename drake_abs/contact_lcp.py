@@ -387,17 +387,12 @@ def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
 
 
 def expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
-    """Per-row mu (B, d) from per-contact mu (B, nc): friction and cone rows get mu / h."""
-    mu = mu_n[:, cone.row_contact]
-    mu[:, cone.sizes()[0] :] /= h
-    return mu
-
-
-def expand_dmu(dmu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
-    """d mu_rows / d z_n (B, d, nc) from d mu_n / d z_n (B, nc, nc)."""
-    dmu = dmu_n[:, cone.row_contact]
-    dmu[:, cone.sizes()[0] :] /= h
-    return dmu
+    """Per-row values (B, d, ...) from per-contact values (B, nc, ...): each row takes its
+    contact's value, divided by h on friction and cone rows. For mu (B, nc) and for its
+    derivative d mu_n / d z_n (B, nc, nc), giving d mu_rows / d z_n (B, d, nc)."""
+    rows = mu_n[:, cone.row_contact]
+    rows[:, cone.sizes()[0] :] /= h
+    return rows
 
 
 def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient):
@@ -416,7 +411,7 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing
             np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
             + np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
         )
-        dmu_rows = expand_dmu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
+        dmu_rows = expand_mu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
         dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
     dx = _chain_out(inner, quant.W, G, dlam, quant.N, quant.dN, v_next, h)  # (B, nq + nv, P)
     nx = nq + nv
