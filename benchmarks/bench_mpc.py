@@ -30,13 +30,15 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs import quadcopter as qc
+from drake_abs.experiments import mpc_quadcopter as task
 from drake_abs.graybox import TrackingCost, closed_loop
 from drake_abs.qp_mpc import MpcSpec, QpMpc, riccati_terminal_cost, theta_from_cost
 
 PRM = qc.QuadcopterParams()
-X_REF = np.r_[-6.0, -3.5, 0.0, np.zeros(9)]
-Q_D = np.r_[np.ones(6), 0.1 * np.ones(6)]
-R_D = np.full(4, 0.01)
+# the paper 003 task of drake-abs experiment mpc-quadcopter
+X_REF = np.array(task.X_REF)
+Q_D = np.array(task.STAGE_Q)
+R_D = np.array(task.STAGE_R)
 
 
 def setup():
@@ -46,10 +48,11 @@ def setup():
     spec = MpcSpec(A, B, 12, X_REF, PRM.hover_input(), u_min, u_max, x_min, x_max)
     P, _ = riccati_terminal_cost(A, B, np.diag(Q_D), np.diag(R_D))
     theta = theta_from_cost(Q_D, R_D, P)
-    P_c = np.diag(np.r_[np.ones(6), 1e3 * np.ones(3), np.ones(3)])
+    P_c = np.diag(task.TERMINAL_P)
     cost = TrackingCost(
-        np.diag(Q_D), np.diag(R_D), P_c, X_REF, PRM.hover_input(), x_min, x_max, 300.0
-    )
+        np.diag(Q_D), np.diag(R_D), P_c, X_REF, PRM.hover_input(), x_min, x_max,
+        task.Config().penalty_weight,
+    )  # fmt: skip
     return spec, theta, cost
 
 

@@ -213,18 +213,25 @@ def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, see
     return {"thetas": thetas, "rows": rows, "diverged_at": None, "error": None}
 
 
-def _checkpoint(obj, exact, theta, size: TrainingSize, seed: int, k: int, cp_seed) -> dict:
-    """The design's FOPG variance and its bias against the exact reference at theta."""
+def _checkpoint(
+    obj, exact, theta, size: TrainingSize, seed: int, k: int, cp_seed, references: dict
+) -> dict:
+    """The design's FOPG variance and its bias against the exact reference at theta.
+    ``references`` caches the exact references by (seed, k, theta): every design starts from
+    the same theta, so iteration 0 shares one."""
     stats = measure_variance(
         lambda th, rng: first_order(obj, th, rng, size.samples),
         theta,
         batches=size.bias_batches,
         seed=cp_seed,
     )
-    ref = reference_gradient(
-        exact, theta, samples=size.reference_samples, batches=size.reference_batches,
-        seed=np.random.SeedSequence([seed, k, 1]),
-    )  # fmt: skip
+    key = (seed, k, np.asarray(theta, dtype=float).tobytes())
+    if key not in references:
+        references[key] = reference_gradient(
+            exact, theta, samples=size.reference_samples, batches=size.reference_batches,
+            seed=np.random.SeedSequence([seed, k, 1]),
+        )  # fmt: skip
+    ref = references[key]
     return {
         "seed": seed, "iteration": k, "variance": stats.trace_variance,
         "variance_se": stats.trace_variance_se,
@@ -248,7 +255,7 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
             return float("nan")
 
     eval_iters = sorted(set(range(0, size.iterations + 1, size.eval_every)) | {size.iterations})
-    designs = {}
+    designs, references = {}, {}
     for name, smoothing in DESIGNS.items():
         obj = task.objective(smoothing, size.horizon)
         returns, checkpoints, unconverged, seconds, diverged, errors = [], [], 0, 0.0, {}, {}
@@ -270,7 +277,9 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
                 theta = log["thetas"][k]
                 cp_seed = np.random.SeedSequence([seed, k])
                 try:
-                    checkpoints.append(_checkpoint(obj, exact, theta, size, seed, k, cp_seed))
+                    checkpoints.append(
+                        _checkpoint(obj, exact, theta, size, seed, k, cp_seed, references)
+                    )
                 except (ValueError, FloatingPointError) as err:  # non-finite rollouts: reported
                     checkpoints.append({"seed": seed, "iteration": k, "failed": str(err)})
         R = np.array(returns)
