@@ -203,6 +203,10 @@ def apply_matrix_policy(
     return F, delta, classes.astype(np.int8)
 
 
+#: The solver options' defaults (see :func:`solve_lcp`).
+SOLVER_DEFAULTS = {"tol": 1e-12, "max_iterations": 100, "exact_tol": 1e-15}
+
+
 def check_solver_options(tol: float, max_iterations: int, exact_tol: float) -> None:
     """Raise ``ValueError`` naming the option unless tol > 0, max_iterations >= 1 (an integer)
     and 0 < exact_tol < 1."""
@@ -220,9 +224,9 @@ def solve_lcp(
     mu=0.0,
     *,
     jacobians: bool = False,
-    tol: float = 1e-12,
-    max_iterations: int = 100,
-    exact_tol: float = 1e-15,
+    tol: float = SOLVER_DEFAULTS["tol"],
+    max_iterations: int = SOLVER_DEFAULTS["max_iterations"],
+    exact_tol: float = SOLVER_DEFAULTS["exact_tol"],
     strict: bool = False,
     on_bad_matrix: OnBadMatrix = "raise",
     warm_start: tuple[np.ndarray, np.ndarray] | None = None,
@@ -310,22 +314,27 @@ def solve_lcp_trusted(
     mu: np.ndarray,
     *,
     jacobians: bool = False,
-    tol: float = 1e-12,
-    max_iterations: int = 100,
-    exact_tol: float = 1e-15,
+    tol: float = SOLVER_DEFAULTS["tol"],
+    max_iterations: int = SOLVER_DEFAULTS["max_iterations"],
+    exact_tol: float = SOLVER_DEFAULTS["exact_tol"],
     strict: bool = False,
+    monotone: bool = False,
 ) -> LCPResult:
     """:func:`solve_lcp` for callers inside the package whose arrays are already in the batch
-    form: F (B, d, d), q (B, d) and mu (B, d) (one per contact), float64, finite, with options
-    already validated (the rigid-body step, every time step). No shape, finiteness or matrix
-    check is made, and F is treated as possibly non-monotone (as ``on_bad_matrix="attempt"``):
-    the same iterations, flags and warnings as :func:`solve_lcp`, without its per-call checks.
+    form: F (d, d) shared or (B, d, d), q (B, d) and mu (B, d) (one per contact, >= 0),
+    float64, finite, with options already validated (the LCS and rigid-body steps, every time
+    step). No shape, finiteness or matrix check is made. F is treated as possibly non-monotone
+    (as ``on_bad_matrix="attempt"``) unless ``monotone`` says the caller has verified it is PSD
+    or a P-matrix (as :class:`~drake_abs.LCS` does once, ``on_bad_matrix="trusted"``): the same
+    iterations, flags and warnings as :func:`solve_lcp`, without its per-call checks.
     ``dlam_dmu`` is (B, d, d)."""
     B = q.shape[0]
+    matrix_class = MatrixClass.PSD if monotone else -1
     return _solve(
-        F, q, mu, np.zeros(B, dtype=bool), jacobians=jacobians, tol=tol,
+        F, q, mu, np.full(B, monotone), jacobians=jacobians, tol=tol,
         max_iterations=max_iterations, exact_tol=exact_tol, strict=strict, per_contact_mu=True,
-        regularization=np.zeros(B), matrix_class=np.full(B, -1, dtype=np.int8), warm_start=None,
+        regularization=np.zeros(B), matrix_class=np.full(B, matrix_class, dtype=np.int8),
+        warm_start=None,
     )  # fmt: skip
 
 

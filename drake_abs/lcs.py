@@ -15,7 +15,14 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
-from drake_abs.ipm import LCPResult, OnBadMatrix, apply_matrix_policy, solve_lcp
+from drake_abs.ipm import (
+    SOLVER_DEFAULTS,
+    LCPResult,
+    OnBadMatrix,
+    apply_matrix_policy,
+    check_solver_options,
+    solve_lcp_trusted,
+)
 from drake_abs.smoothing import Exact, SmoothingPolicy
 
 GradientMode = Literal["frozen", "total"]
@@ -103,6 +110,7 @@ class LCS:
                 "LCS.solver_options may set tol, max_iterations and exact_tol; "
                 f"got {sorted(unknown)}"
             )
+        check_solver_options(**{**SOLVER_DEFAULTS, **self.solver_options})
         # One matrix check here, so that every step can skip it.
         arrays["F"] = apply_matrix_policy(arrays["F"], self.on_bad_matrix)[0]
         verified = self.on_bad_matrix != "attempt"
@@ -162,8 +170,16 @@ class LCS:
         X, U, single = self._inputs(x, u)
         z = self.contact_distance(X, U)
         mu = smoothing.mu(z, self.F)
-        options = {"on_bad_matrix": self._step_check, **self.solver_options}
-        lcp = solve_lcp(self.F, z, mu, jacobians=jacobians, strict=strict, **options)
+        mu = np.asarray(mu, dtype=float)
+        if mu.shape != z.shape or not (np.all(mu >= 0) and np.all(np.isfinite(mu))):
+            raise ValueError(
+                f"smoothing {smoothing!r} must return a finite mu >= 0 of shape {z.shape}; got "
+                f"shape {mu.shape}, min {float(np.min(mu)) if mu.size else None}"
+            )
+        lcp = solve_lcp_trusted(
+            self.F, z, mu, jacobians=jacobians, strict=strict,
+            monotone=self._step_check == "trusted", **self.solver_options,
+        )  # fmt: skip
         x_next = X @ self.A.T + U @ self.B.T + lcp.lam @ self.C.T + self.c
         jac = [None] * 6
         if jacobians:

@@ -174,6 +174,15 @@ def test_lcs_validation_names_the_matrix():
         rollout(lcs, np.array([0.0, np.inf, 0.0, 0.0]), np.zeros((3, 2)))
     with pytest.raises(ValueError, match=r"solver_options may set tol.*\['jacobians'\]"):
         LCS(**kwargs, solver_options={"jacobians": True})
+    with pytest.raises(ValueError, match="tol must be a positive finite number"):
+        LCS(**kwargs, solver_options={"tol": -1.0})
+
+    class Negative(Fixed):
+        def mu(self, z, F):
+            return -super().mu(z, F)
+
+    with pytest.raises(ValueError, match=r"smoothing .*Negative.*finite mu >= 0"):
+        lcs.step(np.zeros(4), np.zeros(2), Negative(1e-3))
 
 
 def test_lcs_does_not_freeze_the_callers_arrays():
