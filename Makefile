@@ -1,14 +1,18 @@
 # drake-abs: `make demo` runs the main job, `make test` the tests. Both create .venv on first use.
-VENV   := .venv
-PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
+VENV        := .venv
+PY          := $(VENV)/bin/python
+STAMP       := $(VENV)/.installed
+CONSTRAINTS := constraints.txt
 
-.PHONY: demo test lint format bench clean
+.PHONY: demo test lint format bench lock clean
 
-$(STAMP): pyproject.toml
+# Install the package with the versions the suite last passed with (constraints.txt), then
+# compile and cache the numba kernels so that the first solve in a new process is fast.
+$(STAMP): pyproject.toml $(CONSTRAINTS)
 	@test -x $(PY) || "$$(tools/find_python312.sh)" -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet --upgrade pip -c $(CONSTRAINTS)
+	$(PY) -m pip install --quiet -e '.[dev]' -c $(CONSTRAINTS)
+	$(VENV)/bin/drake-abs precompile
 	@touch $(STAMP)
 
 demo: $(STAMP)
@@ -31,6 +35,23 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_policy_gradient.py --json results/bench_policy_gradient.json
 	$(PY) benchmarks/bench_variance.py
 	$(PY) benchmarks/bench_mpc.py
+
+# Regenerate constraints.txt: upgrade to the newest versions pyproject.toml's ranges allow, run
+# the whole suite, and record the versions only if it passes.
+lock:
+	@test -x $(PY) || "$$(tools/find_python312.sh)" -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet --upgrade --upgrade-strategy eager -e '.[dev]'
+	$(VENV)/bin/drake-abs precompile
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/ruff check .
+	$(PY) -m pytest tests --nbmake notebooks -q
+	@echo "# The versions 'make test' last passed with (Python $$($(PY) -c 'import platform; print(platform.python_version())'), Linux x86_64)." > $(CONSTRAINTS).new
+	@echo "# Regenerate with 'make lock'; pyproject.toml keeps the supported ranges." >> $(CONSTRAINTS).new
+	$(PY) -m pip freeze --all --exclude-editable | grep -v '^-e ' >> $(CONSTRAINTS).new
+	mv $(CONSTRAINTS).new $(CONSTRAINTS)
+	@touch $(STAMP)
+	@echo "wrote $(CONSTRAINTS)"
 
 clean:
 	rm -rf $(VENV) results .pytest_cache .ruff_cache

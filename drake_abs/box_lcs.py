@@ -2,7 +2,7 @@
 the box of paper 000 Figure 6b (and the ball of section 8.3 once it has landed).
 
 Without rotation the mass matrix ``M = m I`` and the contact Jacobians are constant, so the
-rigid-body time-stepping LCP of MATH.md section 6 (:mod:`drake_abs.contact_lcp`) is affine in
+rigid-body time-stepping LCP of docs/math.md section 6 (:mod:`drake_abs.contact_lcp`) is affine in
 the state and input: it is an :class:`~drake_abs.lcs.LCS`. One contact, at the bottom of the
 body, with a linearised friction cone of k = 2 directions (+x, -x):
 

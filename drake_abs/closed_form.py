@@ -1,4 +1,4 @@
-"""Closed-form solution of the one-contact mu-softened LCP (MATH.md section 2).
+"""Closed-form solution of the one-contact mu-softened LCP (docs/math.md section 2).
 
 For one contact the softened complementarity conditions
 

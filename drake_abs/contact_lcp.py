@@ -1,4 +1,4 @@
-"""Rigid bodies with contact, time-stepping, as a mu-softened LCP (MATH.md section 6; paper 000
+"""Rigid bodies with contact, time-stepping, as a mu-softened LCP (docs/math.md section 6; paper 000
 eq. 2.2, paper 001 eqs. 1.3-1.5), with the full step Jacobian.
 
 For one step of length h, with inverse mass matrix W = M(q)^-1, the velocity without contact
@@ -29,7 +29,8 @@ relaxation Dojo uses). Barrier smoothing applied everywhere therefore also softe
 (a sliding body creeps to a stop); ABS smooths only while a contact closes in. In the ``total``
 gradient mode mu is differentiated through z_n (not through F_nn).
 
-Jacobians (MATH.md section 4 chain rule): with p = (q, v, u) and ``f = G^T lam`` (G = [Jn; Jt]),
+Jacobians (docs/math.md section 4, chain rule): with p = (q, v, u) and ``f = G^T lam``
+(G = [Jn; Jt]),
 
     d lam / dp = (d lam / d z) (dz/dp + (dF/dp) lam)
     (dz/dp + (dF/dp) lam)_top = [dphi; 0] + S (dG v+ + G (dv_free + dW f + W dG^T lam))

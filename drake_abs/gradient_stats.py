@@ -1,4 +1,4 @@
-"""Variance and bias of policy-gradient estimators (MATH.md section 7; paper 000 Theorem 4.2,
+"""Variance and bias of policy-gradient estimators (docs/math.md section 7; paper 000 Theorem 4.2,
 section 8.2 Figure 3 and section 8.4 Figure 5).
 
 For an estimator ``g_hat(theta)`` of ``grad J(theta)`` (one call = one estimate from a batch of

@@ -20,7 +20,7 @@ uniform on the unit sphere. Gray-box update (eq. 10): d_k = eta_k J_model + (1 -
 theta_{k+1} = Proj_Theta(theta_k - alpha_k d_k), eta_k = 1 / (k + 1)^gamma, or a constant eta
 (1: model only, 0: zeroth order only), k = 1, 2, ... (k starts at 1, where log k is defined).
 
-Step size. The extracted paper text (and MATH.md section 9) print
+Step size. The paper's extracted text prints
 "alpha_k = 5e-5 log k + 2/(k+1)^0.75". Read literally, alpha_k grows like log k, which violates
 the paper's own conditions (11a) (sum alpha_k^2 < inf), and alpha_1 = 1.19 against a closed-loop
 gradient of norm ~600 moves theta by ~700 in the first step (measured: the total cost goes from

@@ -1,4 +1,4 @@
-"""Batched primal-dual interior point for the mu-softened LCP (MATH.md section 3; paper 000,
+"""Batched primal-dual interior point for the mu-softened LCP (docs/math.md section 3; paper 000,
 Appendix B, Algorithm 3).
 
 Solves, for every problem b of a batch and every contact i,
@@ -238,7 +238,7 @@ def solve_lcp(
         q: (d,) for one problem or (B, d) for a batch of B.
         mu: central-path value, >= 0; **larger is smoother** and 0 is the exact LCP. A scalar,
             one per problem (B,), or one per contact: (d,) for one problem, (B, d) for a batch.
-        jacobians: also return ``dlam_dq`` and ``dlam_dmu`` (MATH.md section 4).
+        jacobians: also return ``dlam_dq`` and ``dlam_dmu`` (docs/math.md section 4).
         tol: relative tolerance on each row's primal residual and on ``lam_i s_i`` against
             ``mu_i`` (see the module docstring for the exact measure).
         max_iterations: iteration limit; problems that hit it are flagged, not hidden.

@@ -1,4 +1,4 @@
-"""The mu-softened linear complementarity system (MATH.md section 1 and 4).
+"""The mu-softened linear complementarity system (docs/math.md section 1 and 4).
 
     x+ = A x + B u + C lam + c
     z  = D x + E u + d,        s = z + F lam,        lam >= 0, s >= 0, lam_i s_i = mu_i

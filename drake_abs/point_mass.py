@@ -1,6 +1,6 @@
 """A point mass above flat ground as an LCS: the bouncing/thrown ball of paper 000 (Figure 1a).
 
-Semi-implicit Euler with an impulse lam (N s) along the vertical axis (MATH.md section 6 with
+Semi-implicit Euler with an impulse lam (N s) along the vertical axis (docs/math.md section 6 with
 J_n = e_vertical, M = m I, no friction):
 
     v+ = v + h (u / m - g e_v) + lam / m e_v,       p+ = p + h v+

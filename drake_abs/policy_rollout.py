@@ -1,6 +1,6 @@
 """Batched closed-loop rollouts ``x_{t+1} = f(x_t, pi(x_t; theta) + sigma xi_t)`` and their
 pathwise (first-order) gradients by a reverse (adjoint) pass over the stored step Jacobians
-(MATH.md section 7; paper 000 eq. 4.1).
+(docs/math.md section 7; paper 000 eq. 4.1).
 
 M rollouts of H steps run at once through any batched stepper (an :class:`LcsStepper` here, or
 a rigid-body ``ComplementarityStepper``): one call per time step for the whole batch, no

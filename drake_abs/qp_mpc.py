@@ -1,4 +1,4 @@
-"""Differentiable QP-MPC (paper 003 eq. 4, MATH.md section 9): OSQP solve and KKT Jacobians.
+"""Differentiable QP-MPC (paper 003 eq. 4, docs/math.md section 9): OSQP solve and KKT Jacobians.
 
 The problem, in deviations dx = x - x_ref, du = u - u_ref from the reference (an equilibrium of
 the linear prediction model dx+ = A dx + B du), with horizon N::
@@ -14,7 +14,8 @@ slack s with a linear plus a quadratic penalty; with ``soft_state_constraints=Fa
 hard and there is no slack). The control applied is u = u_ref + du_0. (The term dx_0' Q dx_0 is
 a constant and left out.)
 
-Cost parameters theta = (p_Q, p_R, p_P), n_theta = nx + nu + nx (nx + 1) / 2 (MATH.md 9)::
+Cost parameters theta = (p_Q, p_R, p_P), n_theta = nx + nu + nx (nx + 1) / 2
+(docs/math.md section 9)::
 
     Q = diag(p_Q^2) + 1e-6 I,   R = diag(p_R^2) + 1e-6 I,   P = L L' + 1e-6 I
 
@@ -167,7 +168,7 @@ class ThetaLayout:
 
 
 def cost_matrices(theta, nx: int, nu: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(Q (nx, nx), R (nu, nu), P (nx, nx)) of theta (MATH.md section 9)."""
+    """(Q (nx, nx), R (nu, nu), P (nx, nx)) of theta (docs/math.md section 9)."""
     layout = ThetaLayout(nx, nu)
     theta = as_finite_array(theta, "theta", ndim=(1,))
     check_shape(theta, (layout.size,), "theta", "(nx + nu + nx (nx + 1) / 2,)")

@@ -34,7 +34,7 @@ terms (the sign used by the model of paper 003's authors; it vanishes at hover, 
 3.4e-5 kg m^2 it is about 1e-3 of the control torques in this experiment). The discrete model is
 one forward-Euler step, x+ = x + dt f(x, u), dt = 0.1 s; its Jacobians are analytic.
 
-The constants (FACTS.md) are those of the paper authors' 12-state model: m 0.468 kg, l 0.225 m,
+The constants are those of the paper authors' 12-state model: m 0.468 kg, l 0.225 m,
 k 2.98e-6 N s^2, b 1.14e-7 N m s^2, I = diag(4.856e-3, 4.856e-3, 8.801e-3) kg m^2, J_r 3.357e-5
 kg m^2, linear drag 0.25 kg/s per axis; hover at omega = sqrt(m g / (4 k)) = 620.6 rad/s.
 

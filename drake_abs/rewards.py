@@ -1,4 +1,4 @@
-"""Task rewards with their gradients, batched over rollouts (MATH.md section 7).
+"""Task rewards with their gradients, batched over rollouts (docs/math.md section 7).
 
 A reward gives, for states x (M, nx) and inputs u (M, nu):
 

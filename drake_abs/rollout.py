@@ -1,6 +1,6 @@
 """Batched open-loop rollouts of an LCS with the analytic chain rule through every step.
 
-Forward-mode accumulation of the per-step implicit Jacobians (MATH.md section 4):
+Forward-mode accumulation of the per-step implicit Jacobians (docs/math.md section 4):
 
     dx_{t+1}/dx_0   = (dx+/dx)_t  dx_t/dx_0
     dx_{t+1}/du_k   = (dx+/dx)_t  dx_t/du_k   (k < t),     (dx+/du)_t  for k = t

@@ -1,4 +1,5 @@
-"""Smoothing policies: how much to soften each contact (MATH.md section 5; paper 000 section 5).
+"""Smoothing policies: how much to soften each contact (docs/math.md section 5; paper 000
+section 5).
 
 A policy maps a batch of contact distances ``z`` (B, d) (the distances before any impulse acts,
 ``z = D x + E u + d``) and the LCP matrix F to a per-contact central-path value ``mu`` (B, d).
@@ -11,7 +12,8 @@ dynamics are less stiff); ``mu = 0`` is hard contact.
 - :class:`ContactAware`: adaptive barrier smoothing (ABS), ``mu = g(dist)`` with ``dist`` the
   distance of the nearest *inactive* contact (``z_i > 0``) and g non-increasing.
 - :class:`GaussianMatched`: per-contact ABS whose softened solution equals the Gaussian-smoothed
-  exact solution (paper 000 Prop. 5.3 / paper 001 Prop. 4.2, corrected as in MATH.md 5b).
+  exact solution (paper 000 Prop. 5.3 / paper 001 Prop. 4.2, corrected as in docs/math.md
+  section 5b).
 
 Each policy also gives ``dmu_dz`` (B, d, d) for the ``total`` gradient mode; the ``frozen`` mode
 (paper 000 Algorithm 1) treats mu as a constant.
@@ -174,7 +176,7 @@ class ContactAware(SmoothingPolicy):
 
 @dataclass(frozen=True)
 class GaussianMatched(SmoothingPolicy):
-    """Per-contact ABS matched to Gaussian randomised smoothing (MATH.md 5b, corrected).
+    """Per-contact ABS matched to Gaussian randomised smoothing (docs/math.md section 5b).
 
     With ``kappa(z) = (sigma phi(z/sigma) - z Phi(-z/sigma)) / F_ii + c1 z + c2`` and
     ``mu(z) = kappa (z + F_ii kappa)``, the softened one-contact solution with c1 = c2 = 0 equals

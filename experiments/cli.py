@@ -2,6 +2,8 @@
 
 drake-abs demo [--out DIR] [--duration S] [--no-meshcat]
 drake-abs experiment NAME [--out DIR] [--test-size]
+drake-abs record SCENE [--steps N] [--out FILE]
+drake-abs precompile
 """
 
 from __future__ import annotations
@@ -90,7 +92,15 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("scene", help="a scene YAML, or the name of a shipped scene (e.g. box_push)")
     rec.add_argument("--steps", type=int, default=100)
     rec.add_argument("--out", default=None, help="HTML file (default: results/SCENE.html)")
+    sub.add_parser("precompile", help="compile and cache the numba kernels (make does this)")
     args = parser.parse_args(argv)
+    if args.command == "precompile":
+        from drake_abs.experiments.precompile import precompile
+
+        print("compiling and caching the numba kernels (once per install)")
+        total = sum(precompile().values())
+        print(f"done in {total:.1f} s")
+        return 0
     if args.command == "record":
         return _record(args.scene, args.steps, args.out)
     if args.command == "demo":

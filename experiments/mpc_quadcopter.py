@@ -6,7 +6,7 @@
    (x_ref, u_ref) (:mod:`drake_abs.sysid`).
 2. The policy: QP-MPC with the identified model, N = 12, slack penalty 25 (linear and
    quadratic), theta = (p_Q, p_R, p_P) initialised at Q = Qc, R = Rc and P from the Riccati
-   equation of the identified model (MATH.md section 9).
+   equation of the identified model (docs/math.md section 9).
 3. Closed loop on the nonlinear quadcopter from x_0 (the paper does not state it; we take the
    origin at hover) to x_ref = (-6, -3.5, 0, 0..) over T = 200 steps; cost C and penalty
    300 dist_1 (:mod:`drake_abs.graybox`).

@@ -1,8 +1,8 @@
-"""The mu-softened LCS as a Drake discrete-time system (MATH.md section 1).
+"""The mu-softened LCS as a Drake discrete-time system (docs/math.md section 1).
 
 Every step calls :meth:`drake_abs.LCS.step`, the same code the batched core runs. Under
 AutoDiffXd the step is solved in double and the implicit-function-theorem Jacobians are chained
-onto the incoming derivatives (MATH.md section 4).
+onto the incoming derivatives (docs/math.md section 4).
 """
 
 from __future__ import annotations

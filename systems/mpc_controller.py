@@ -46,7 +46,7 @@ def MpcController_(T):
         :class:`~drake_abs.qp_mpc.MpcStatus` code (0 = solved), 1.0 if the fallback was
         applied, and OSQP's iteration count (these carry no derivatives).
 
-        The cost parameters theta (n_theta,) (MATH.md section 9) are a numeric parameter of the
+        The cost parameters theta (n_theta,) (docs/math.md section 9) are a numeric parameter of the
         Context (:meth:`SetTheta`); under AutoDiffXd they may carry derivatives.
 
         Both outputs come from one cached solve per (x, theta).

@@ -1,4 +1,4 @@
-"""The solver against the one-contact closed form (MATH.md section 2)."""
+"""The solver against the one-contact closed form (docs/math.md section 2)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The rigid-body contact step (MATH.md section 6) on a synthetic planar box whose dynamics
+"""The rigid-body contact step (docs/math.md section 6) on a synthetic planar box whose dynamics
 quantities are smooth closed forms: the assembled step Jacobian against central finite
 differences of the whole step, with and without friction, frozen and total."""
 

@@ -1,5 +1,5 @@
-"""Extremes (MATH.md section 3; issue 2 section 5): mu from 1e-14 to 1e3, F condition numbers up
-to 1e10, |q| up to 1e8, batches from 1 to 1e5, many contacts, stiff and large time steps.
+"""Extremes (docs/math.md section 3; issue 2 section 5): mu from 1e-14 to 1e3, F condition
+numbers up to 1e10, |q| up to 1e8, batches from 1 to 1e5, many contacts, stiff and large time steps.
 
 Everywhere: no NaN or inf, and ``converged`` is True exactly when ``residual <= tol``.
 """

@@ -1,5 +1,5 @@
 """Every Jacobian against central finite differences, and the Gaussian-matched identity against
-numerical quadrature (MATH.md sections 4 and 5b)."""
+numerical quadrature (docs/math.md sections 4 and 5b)."""
 
 import numpy as np
 import pytest

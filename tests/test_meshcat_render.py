@@ -2,6 +2,7 @@
 and the box_push page rendered offline by headless Chromium (the scene is drawn, not a blank or
 empty-viewer page)."""
 
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -51,6 +52,11 @@ def _chromium() -> str:
         "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None
     )
     if exe is None:
+        if os.environ.get("CI") == "true" or os.environ.get("DRAKE_ABS_REQUIRE_BROWSER"):
+            pytest.fail(
+                "Chromium not installed, and this run requires the browser test (CI, or "
+                "DRAKE_ABS_REQUIRE_BROWSER set): .ci/run installs chromium chromium-driver"
+            )
         pytest.skip(
             "Chromium not installed: apt-get install chromium chromium-driver (CI installs it in "
             ".ci/run)"

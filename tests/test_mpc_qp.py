@@ -1,4 +1,4 @@
-"""The QP-MPC core (paper 003 eq. 4, MATH.md section 9): theta parameterisation, KKT Jacobians
+"""The QP-MPC core (paper 003 eq. 4, docs/math.md section 9): theta parameterisation, KKT Jacobians
 against central differences with active input, state and slack constraints, the weakly active
 rule, LQR equivalence, OSQP's adjoint as an independent path, failure statuses and fallback,
 bad input."""
@@ -111,7 +111,15 @@ def test_unconstrained_mpc_with_riccati_terminal_cost_is_lqr(rng):
 def test_weakly_active_constraint_is_released_deterministically():
     """An input bound placed exactly at the unconstrained optimum is active with a zero
     multiplier: the rule treats it as inactive (the released branch's Jacobian is -K), counts
-    it, and gives the same answer on every solve."""
+    it, and picks the same branch on every solve, warm-started or not.
+
+    Repeated solves are warm-started from the previous one, which changes OSQP's rho and the
+    roundoff of the polished solution (the bound's residual is 0.0 cold and -3.3e-14 warm with
+    osqp 1.1.3), so they are compared to a tolerance: the released branch's Jacobians are
+    smooth functions of the active set, so equal active sets give equal Jacobians up to the
+    KKT solve's roundoff (1e-10 relative is far below the 1e-8 LQR check and far above ulps).
+    Bit-identical numbers are promised only for the same call sequence on a fresh controller
+    (tested in tests/test_determinism.py)."""
     x = X_REF + np.r_[0.3, -0.2, 0.1, 0.05, 0, 0, 0.02, 0, 0, 0, 0, 0]
     free = QpMpc(MpcSpec(A_H, B_H, 12, X_REF, U_REF), THETA).solve(x)
     u_max = np.full(4, np.inf)
@@ -122,8 +130,9 @@ def test_weakly_active_constraint_is_released_deterministically():
     np.testing.assert_allclose(first.du0_dx, -K_LQR, rtol=1e-8, atol=1e-9)
     for _ in range(3):
         again = mpc.solve(x, jacobians=True)
-        np.testing.assert_array_equal(again.du0_dx, first.du0_dx)
-        np.testing.assert_array_equal(again.du0_dtheta, first.du0_dtheta)
+        assert again.active == first.active and again.weakly_active == first.weakly_active
+        np.testing.assert_allclose(again.du0_dx, first.du0_dx, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(again.du0_dtheta, first.du0_dtheta, rtol=1e-10, atol=1e-12)
 
 
 def test_osqp_adjoint_is_an_independent_path_where_no_slack_is_positive(rng):

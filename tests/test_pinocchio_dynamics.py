@@ -144,5 +144,12 @@ def test_quantities_within_equals_distances_then_quantities(name, rng):
     np.testing.assert_array_equal(active, np.flatnonzero(phi <= distance))
     assert 0 < active.size < phi.size
     want = model.quantities(q, v, u, active)
+    # Two code paths (one shared kinematics pass against two separate ones) over the same
+    # pinocchio algorithms: equal up to roundoff, not promised bit for bit across versions.
     for field in FIELDS:
-        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+        g, w = getattr(got, field), getattr(want, field)
+        if w is None:
+            assert g is None, field
+            continue
+        scale = 1.0 + np.abs(w).max(initial=0.0)
+        np.testing.assert_allclose(g, w, rtol=0, atol=1e-13 * scale, err_msg=field)

@@ -47,7 +47,8 @@ def test_batched_step_equals_one_at_a_time(rng):
 
 
 def test_hover_is_an_equilibrium_at_any_position_and_yaw():
-    assert PRM.hover_speed == pytest.approx(620.61, abs=0.01)  # FACTS.md: ~620.6 rad/s
+    # the authors' model hovers at about 620.6 rad/s
+    assert PRM.hover_speed == pytest.approx(620.61, abs=0.01)
     x = np.zeros(12)
     x[:3] = (-6.0, -3.5, 2.0)
     x[8] = 0.7
