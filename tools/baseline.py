@@ -1,0 +1,137 @@
+#!/usr/bin/env python3
+"""Record, or compare against, the numbers the project produces: every experiment's test-size
+``summary.json`` and the benchmarks' JSON outputs.
+
+    python tools/baseline.py record [--dir benchmarks/baselines]
+    python tools/baseline.py compare [--dir benchmarks/baselines] [--rtol 1e-12]
+
+``record`` runs each experiment at test size (through the ``drake-abs`` CLI, as a user would) and
+each benchmark at its quick size, and stores their JSON outputs. ``compare`` runs them again and
+lists every numeric entry that differs by more than ``rtol`` (relative to the larger magnitude,
+absolute below 1e-300). Entries that measure time, and strings (paths), are skipped: a move of the
+code must leave the numbers unchanged, not the clock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+EXPERIMENTS = (
+    "bouncing-ball",
+    "box-convergence",
+    "drake-comparison",
+    "mpc-quadcopter",
+    "gradient-variance",
+    "bias-return",
+    "ball-throw",
+    "smoothing-vs-rs",
+)
+# benchmark script -> its arguments (quick sizes); each writes the JSON file named by --json
+BENCHMARKS = {
+    "bench_lcp": ["--quick"],
+    "bench_scenes": ["--quick"],
+    "bench_variance": ["--quick"],
+    "bench_mpc": ["--steps", "40"],
+    "bench_policy_gradient": ["--drake-rollouts", "2"],
+}
+TIMING = re.compile(
+    r"(^|_)(s|ms|us|seconds|time|times|wall|per_s|per_second|speed|ratio|rate)"
+    r"($|_)|seconds|time|wall|_us$|_ms$|per_sec|speedup|ratio|throughput|_over_",
+    re.I,
+)
+
+
+def _bin(name: str) -> str:
+    return str(Path(sys.executable).parent / name)
+
+
+def run_all(work: Path) -> dict[str, object]:
+    """Run every experiment and benchmark into ``work``; returns name -> parsed JSON."""
+    out: dict[str, object] = {}
+    for name in EXPERIMENTS:
+        folder = work / name
+        cmd = [_bin("drake-abs"), "experiment", name, "--test-size", "--out", str(folder)]
+        print("running", " ".join(cmd[1:]), flush=True)
+        subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+        out[f"experiment/{name}"] = {  # summary.json, or whatever JSON the experiment wrote
+            f.name: json.loads(f.read_text()) for f in sorted(folder.glob("*.json"))
+        }
+    for name, args in BENCHMARKS.items():
+        path = work / f"{name}.json"
+        cmd = [sys.executable, str(ROOT / "benchmarks" / f"{name}.py"), *args, "--json", str(path)]
+        print("running", name, *args, flush=True)
+        subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+        out[f"benchmark/{name}"] = json.loads(path.read_text()) if path.is_file() else None
+    return out
+
+
+def _leaves(obj, prefix=""):
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _leaves(v, f"{prefix}/{k}")
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _leaves(v, f"{prefix}[{i}]")
+    elif isinstance(obj, bool) or obj is None:
+        yield prefix, obj
+    elif isinstance(obj, (int, float)):
+        yield prefix, float(obj)
+
+
+def differences(old, new, rtol: float) -> list[str]:
+    a, b = dict(_leaves(old)), dict(_leaves(new))
+    bad = []
+    for key in sorted(set(a) | set(b)):
+        if TIMING.search(key.rsplit("/", 1)[-1]) or "time" in key.lower():
+            continue
+        x, y = a.get(key, "missing"), b.get(key, "missing")
+        if isinstance(x, float) and isinstance(y, float):
+            same = (math.isnan(x) and math.isnan(y)) or x == y
+            scale = max(abs(x), abs(y))
+            if not same and not (scale < 1e-300 or abs(x - y) <= rtol * scale):
+                bad.append(f"{key}: {x!r} -> {y!r} (rel {abs(x - y) / scale:.2e})")
+        elif x != y:
+            bad.append(f"{key}: {x!r} -> {y!r}")
+    return bad
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("mode", choices=("record", "compare"))
+    parser.add_argument("--dir", type=Path, default=ROOT / "benchmarks" / "baselines")
+    parser.add_argument("--rtol", type=float, default=1e-12)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        results = run_all(Path(tmp))
+    if args.mode == "record":
+        if args.dir.exists():
+            shutil.rmtree(args.dir)
+        for key, value in results.items():
+            path = args.dir / f"{key}.json"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(value, indent=1, sort_keys=True) + "\n")
+        print(f"recorded {len(results)} outputs in {args.dir}")
+        return 0
+    failures = 0
+    for key, value in results.items():
+        path = args.dir / f"{key}.json"
+        old = json.loads(path.read_text()) if path.is_file() else "missing"
+        bad = differences(old, value, args.rtol)
+        print(f"{key}: {'same' if not bad else f'{len(bad)} differences'}")
+        for line in bad[:20]:
+            print("   ", line)
+        failures += bool(bad)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
