@@ -59,7 +59,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_ab
 
 import numpy as np
 
-import drake_abs.ipm
+import drake_abs.lcp.ipm
 from drake_abs import solve_lcp
 
 SEED = 20250101
@@ -597,7 +597,9 @@ def metadata(cfg: Config) -> dict[str, Any]:
         "python": platform.python_version(),
         "numpy": np.__version__,
         "drake": drake_version,
-        "ipm_sha256": hashlib.sha256(Path(drake_abs.ipm.__file__).read_bytes()).hexdigest()[:12],
+        "ipm_sha256": hashlib.sha256(Path(drake_abs.lcp.ipm.__file__).read_bytes()).hexdigest()[
+            :12
+        ],
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
     }
@@ -619,7 +621,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     meta = metadata(cfg)
     print(
         f"bench_lcp ({cfg.name}): seed {SEED}, numpy {meta['numpy']}, drake {meta['drake']}, "
-        f"python {meta['python']}, {meta['cpu_count']} CPU(s), drake_abs/ipm.py sha256 "
+        f"python {meta['python']}, {meta['cpu_count']} CPU(s), drake_abs/lcp/ipm.py sha256 "
         f"{meta['ipm_sha256']}"
     )
     log = WarningLog()

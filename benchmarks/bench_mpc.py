@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs import quadcopter as qc
 from drake_abs.experiments import mpc_quadcopter as task
-from drake_abs.graybox import TrackingCost, closed_loop
-from drake_abs.qp_mpc import MpcSpec, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.mpc.graybox import TrackingCost, closed_loop
+from drake_abs.mpc.qp_mpc import MpcSpec, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.tasks import quadcopter as qc
 
 PRM = qc.QuadcopterParams()
 # the paper 003 task of drake-abs experiment mpc-quadcopter

@@ -3,9 +3,9 @@
 One batch: M = 256 noisy closed-loop rollouts of H = 200 steps of a box pushed to a goal by a
 linear policy, and the gradient of the mean return with respect to the policy's parameters.
 
-- Ours: the box as a constant-matrix LCS (:class:`drake_abs.box_lcs.TranslatingBox`, ABS
+- Ours: the box as a constant-matrix LCS (:class:`drake_abs.tasks.box_lcs.TranslatingBox`, ABS
   contact-aware smoothing), all M rollouts batched, the gradient by the adjoint pass
-  (:func:`drake_abs.estimators.first_order`). The box never leaves the ground, so every
+  (:func:`drake_abs.policy.estimators.first_order`). The box never leaves the ground, so every
   contact is active and ABS asks for mu = mu_min = 0: each of the M H steps is an exact
   frictional LCP (4 rows), solved to the solver's default accuracy.
 - Drake: the same box (1 kg, 0.4 x 0.2 x 0.2 m, prismatic x and z joints, friction 0.5, one
@@ -39,16 +39,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_ab
 
 import numpy as np
 
-from drake_abs.box_lcs import TranslatingBox
+from drake_abs.contact.smoothing import ContactAware
 from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
-from drake_abs.estimators import PolicyObjective, first_order
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.policies import LinearPolicy
-from drake_abs.policy_rollout import rollout_policy
-from drake_abs.rewards import QuadraticReward
-from drake_abs.scene import Scene
-from drake_abs.smoothing import ContactAware
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.multibody.scene import Scene
+from drake_abs.policy.estimators import PolicyObjective, first_order
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollout import rollout_policy
+from drake_abs.tasks.box_lcs import TranslatingBox
 
 M, H = 256, 200
 GOAL = 0.5  # m

@@ -31,9 +31,8 @@ from pydrake.systems.analysis import Simulator
 
 from drake_abs import Exact
 from drake_abs.diagrams.drake_twin import make_drake_twin
-from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-from drake_abs.scene import Scene
-from drake_abs.systems import ComplementarityStepper
+from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.scene import Scene
 
 
 def _best_time(fn, repeats: int) -> float:
@@ -50,9 +49,7 @@ def _best_time(fn, repeats: int) -> float:
 def ours_rollout(scene: Scene, steps: int):
     """States of a rollout from the scene's initial state with zero actuation."""
     sm = build_scene_model(scene)
-    stepper = ComplementarityStepper(
-        sm.contact_model, Exact(), activation_distance=scene.activation_distance
-    )
+    stepper = sm.stepper(smoothing=Exact())
     nu = sm.contact_model.nu
     xs = [np.concatenate([sm.q0, sm.v0])[None]]
     for _ in range(steps):
@@ -149,9 +146,7 @@ def bench_active_contacts(repeats: int, quick: bool) -> list[dict]:
         for n, k in grid:
             scene, x = edge_scene(Path(folder), n, k)
             sm = build_scene_model(scene)
-            st = ComplementarityStepper(
-                sm.contact_model, Exact(), activation_distance=scene.activation_distance
-            )
+            st = sm.stepper(smoothing=Exact())
             u = np.zeros((1, 1))
             r = st.step(x[None], u)
             assert int(r.active.sum()) == k, (n, k, int(r.active.sum()))

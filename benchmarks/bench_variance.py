@@ -5,17 +5,17 @@ The task is the hopping ball of :mod:`drake_abs.experiments.gradient_variance` (
 h = 0.01 s, inelastic ground, action noise sigma = 1 N, the spring policy), at one horizon.
 Measured in the same run, at the same theta, with the same number of rollouts per estimate:
 
-- ``FOPG-ABS``: :func:`drake_abs.estimators.first_order` through the contact-aware ABS model
+- ``FOPG-ABS``: :func:`drake_abs.policy.estimators.first_order` through the contact-aware ABS model
   (``ContactAware(1e-2, 0.05)``, frozen gradient), M rollouts batched in one call;
 - ``FOPG-exact``: the same through hard contact (the baseline both try to improve on);
-- ``RS``: :func:`drake_abs.estimators.randomized_smoothing` on the exact model: the mean
+- ``RS``: :func:`drake_abs.policy.estimators.randomized_smoothing` on the exact model: the mean
   first-order gradient at N parameters ``theta + w_i``, ``w_i ~ N(0, std^2 I)``, one rollout each.
   As implemented in ``estimators`` it simulates its N rollouts one by one (each has its own theta),
   so it does not get the batching FOPG gets; that is part of its cost here.
 
 For each: the trace variance ``v`` of one estimate (K independent estimates,
-:func:`drake_abs.gradient_stats.measure_variance`), the mean wall time ``t`` per estimate, and
-``v * t``, the variance per second of compute (the variance of the average of the estimates one
+:func:`drake_abs.policy.gradient_stats.measure_variance`), the mean wall time ``t`` per estimate,
+and ``v * t``, the variance per second of compute (the variance of the average of the estimates one
 second buys; lower is better). Printed: the table and the ratio RS / FOPG-ABS of ``v * t``. All
 random numbers come from ``--seed``. Note: the estimators have different means (ABS and RS are
 biased towards different smoothed objectives); variance alone says nothing about bias.
@@ -38,10 +38,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_ab
 
 import numpy as np  # noqa: E402
 
-from drake_abs.estimators import first_order, randomized_smoothing  # noqa: E402
+from drake_abs.contact.smoothing import ContactAware, Exact  # noqa: E402
 from drake_abs.experiments.gradient_variance import hopping_ball, spring_theta  # noqa: E402
-from drake_abs.gradient_stats import measure_variance  # noqa: E402
-from drake_abs.smoothing import ContactAware, Exact  # noqa: E402
+from drake_abs.policy.estimators import first_order, randomized_smoothing  # noqa: E402
+from drake_abs.policy.gradient_stats import measure_variance  # noqa: E402
 
 
 def bench(horizon: int, samples: int, batches: int, rs_std: float, seed: int) -> dict:

@@ -10,5 +10,5 @@ from drake_abs.diagrams.lcs_simulation import (
 __all__ = ["DiagramGradient", "add_lcs_plant", "make_lcs_diagram", "simulate_with_gradient"]
 
 # Scene-level builders import heavier modules; import them explicitly:
-#   drake_abs.diagrams.scene_builder (build_scene_model), drake_abs.diagrams.drake_twin
+#   drake_abs.multibody.builder (build_scene_model), drake_abs.diagrams.drake_twin
 #   (make_drake_twin), drake_abs.diagrams.scene_visualization (record_scene, record_rollout_html)

@@ -20,8 +20,8 @@ from pydrake.multibody.plant import (
 )
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
-from drake_abs.diagrams.scene_builder import add_scene_models
-from drake_abs.scene import Scene
+from drake_abs.multibody.builder import add_scene_models
+from drake_abs.multibody.scene import Scene
 
 APPROXIMATIONS = {
     "sap": DiscreteContactApproximation.kSap,
@@ -63,7 +63,7 @@ def make_drake_twin(
     material: dict | None = None,
 ) -> DrakeTwin:
     """The scene as a discrete Drake MultibodyPlant with ``approximation`` in sap, similar,
-    lagged. Coordinates match :func:`~drake_abs.diagrams.scene_builder.build_scene_model`
+    lagged. Coordinates match :func:`~drake_abs.multibody.builder.build_scene_model`
     (floating bases as joint chains), so states can be compared entry by entry.
 
     ``material``: optional point-contact parameters ``point_stiffness`` (N/m),

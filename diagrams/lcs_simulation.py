@@ -10,8 +10,8 @@ from pydrake.systems.analysis import Simulator_
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from drake_abs.lcs import LCS, GradientMode
-from drake_abs.smoothing import SmoothingPolicy
+from drake_abs.contact.lcs import LCS, GradientMode
+from drake_abs.contact.smoothing import SmoothingPolicy
 from drake_abs.systems import LcsPlant, autodiff
 
 

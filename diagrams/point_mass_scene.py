@@ -11,9 +11,9 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
+from drake_abs.contact.lcs import LCS
+from drake_abs.contact.smoothing import SmoothingPolicy
 from drake_abs.diagrams.lcs_simulation import add_lcs_plant
-from drake_abs.lcs import LCS
-from drake_abs.smoothing import SmoothingPolicy
 from drake_abs.systems import LcsPlant, PointMassVisualizer
 
 _PALETTE = [

@@ -3,12 +3,12 @@
 ``make_quadcopter_mpc_diagram`` connects :class:`~drake_abs.systems.quadcopter_plant.
 QuadcopterPlant` (the true, nonlinear dynamics), :class:`~drake_abs.systems.mpc_controller.
 MpcController` and :class:`ClosedLoopCost` (the upper-level cost and penalty of
-:class:`drake_abs.graybox.TrackingCost`, accumulated step by step), plus a log of the
+:class:`drake_abs.mpc.graybox.TrackingCost`, accumulated step by step), plus a log of the
 controller's status. ``simulate_closed_loop`` runs it for T steps; with ``gradient="theta"`` it
 converts the diagram to AutoDiffXd, seeds the controller's theta parameter and returns
 d total / d theta through the whole diagram: the exact-model gradient of eq. 8 (the plant's own
-Jacobians), which :func:`drake_abs.graybox.closed_loop` with ``gradient="exact"`` computes in the
-core. ``gradient="x0"`` seeds the initial state instead (d x_T / d x_0, for the LQR check).
+Jacobians), which :func:`drake_abs.mpc.graybox.closed_loop` with ``gradient="exact"`` computes
+in the core. ``gradient="x0"`` seeds the initial state instead (d x_T / d x_0, for the LQR check).
 
 Timing: Drake takes the discrete updates of all three systems at t = k dt from the same context,
 so the cost system adds stage(x_k, u_k) with the u_k the plant applies; after T steps its
@@ -27,12 +27,12 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import LogVectorOutput
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs.graybox import TrackingCost
-from drake_abs.qp_mpc import MpcSpec
-from drake_abs.quadcopter import QuadcopterParams
+from drake_abs.mpc.graybox import TrackingCost
+from drake_abs.mpc.qp_mpc import MpcSpec
 from drake_abs.systems import autodiff
 from drake_abs.systems.mpc_controller import MpcController
 from drake_abs.systems.quadcopter_plant import QuadcopterPlant
+from drake_abs.tasks.quadcopter import QuadcopterParams
 
 COST_FIELDS = ("tracking_cost", "violation", "total", "fallback_steps")
 
@@ -163,7 +163,7 @@ class DiagramClosedLoop:
 
     Attributes:
         x_final: (12,) x_T. tracking_cost, violation, total: as in
-            :class:`drake_abs.graybox.ClosedLoopResult`.
+            :class:`drake_abs.mpc.graybox.ClosedLoopResult`.
         status: (T,) MPC status codes per step; fallback: (T,) fallback flags.
         gradient: d total / d theta (n_theta,) for ``gradient="theta"``; d x_T / d x_0
             (12, 12) for ``gradient="x0"``; None otherwise.

@@ -2,7 +2,7 @@
 
 One hector quadrotor (example-robot-data ``hector_description``, visual geometry only) is drawn
 per trajectory; each is posed from the 12-state x (position, and roll-pitch-yaw: Drake's
-``RollPitchYaw(phi, theta, psi)`` is the Z-Y-X rotation of :mod:`drake_abs.quadcopter`) at
+``RollPitchYaw(phi, theta, psi)`` is the Z-Y-X rotation of :mod:`drake_abs.tasks.quadcopter`) at
 every control step, recorded as a Meshcat animation at ``1 / time_step`` frames per second, with
 the flown path drawn as a line and the target as a sphere. Meshcat binds to localhost only.
 """
@@ -26,8 +26,8 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_abs.diagrams.model_files import add_models_without_collisions
-from drake_abs.diagrams.scene_builder import example_robot_data_dir
+from drake_abs.multibody.builder import example_robot_data_dir
+from drake_abs.multibody.model_files import add_models_without_collisions
 
 HECTOR_URDF = "hector_description/robots/quadrotor_base.urdf"
 PATH_COLORS = (

@@ -1,6 +1,6 @@
 """Meshcat playback of a scene's rollout, saved as a self-contained HTML page.
 
-The dynamics plant of :func:`drake_abs.diagrams.scene_builder.build_scene_model` has no SceneGraph
+The dynamics plant of :func:`drake_abs.multibody.builder.build_scene_model` has no SceneGraph
 (contacts are the scene's declared points). To draw a rollout we parse the same model files
 again, into a MultibodyPlant with a SceneGraph, keep their *visual* geometry only, add a ground
 slab and one small sphere per declared contact point, and replay the states through a
@@ -8,7 +8,7 @@ slab and one small sphere per declared contact point, and replay the states thro
 per second). ``meshcat.StaticHtml()`` then gives a page that plays the animation offline.
 
 Collision geometry is dropped while parsing and STL visual meshes are drawn through OBJ copies
-(``add_scene_models(..., collisions=False)``, see :mod:`drake_abs.diagrams.model_files`).
+(``add_scene_models(..., collisions=False)``, see :mod:`drake_abs.multibody.model_files`).
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_abs.diagrams.scene_builder import add_scene_models, build_scene_model
-from drake_abs.scene import Scene
+from drake_abs.multibody.builder import add_scene_models, build_scene_model
+from drake_abs.multibody.scene import Scene
 
 GROUND_RGBA = Rgba(0.45, 0.52, 0.58, 1.0)
 POINT_CONTACT_RGBA = Rgba(0.85, 0.1, 0.1, 1.0)  # zero-radius contact points
@@ -141,14 +141,8 @@ def rollout_states(scene: Scene, steps: int, u=None) -> np.ndarray:
     """States (steps + 1, nq + nv) of ``scene`` from its initial state under a constant input
     ``u`` (nu,) (zero by default), stepped by :class:`ComplementarityStepper` with the scene's
     smoothing and activation distance (no Jacobians)."""
-    from drake_abs.systems import ComplementarityStepper
-
     model = build_scene_model(scene)
-    stepper = ComplementarityStepper(
-        model.contact_model,
-        scene.smoothing_policy(),
-        activation_distance=scene.activation_distance,
-    )
+    stepper = model.stepper()
     nu = model.plant.num_actuators()
     u = np.zeros(nu) if u is None else np.asarray(u, dtype=float)
     xs = np.empty((steps + 1, model.plant.num_positions() + model.plant.num_velocities()))

@@ -1,8 +1,19 @@
 """drake-abs: adaptive barrier smoothing for first-order gradients through contact.
 
-The numerical core (this package's top level) needs no Drake: numpy/scipy, batched over a leading
-dimension. Drake systems live in :mod:`drake_abs.systems`, diagram builders in
-:mod:`drake_abs.diagrams`, experiments and the CLI in :mod:`drake_abs.experiments`.
+The numerical core, one subpackage per concept, each layer importing only the ones above it in
+this list (``docs/architecture.md``; ``tests/test_layers.py`` holds the table):
+
+- :mod:`drake_abs.lcp`: the softened LCP, its interior-point solver and Jacobians;
+- :mod:`drake_abs.contact`: smoothing policies, linear complementarity systems, the rigid-body
+  time-stepping LCP;
+- :mod:`drake_abs.policy`: policies, rewards, batched closed-loop rollouts, gradient estimators;
+- :mod:`drake_abs.tasks`: the point mass, the translating box, the quadcopter;
+- :mod:`drake_abs.mpc`: differentiable QP-MPC and gray-box tuning;
+- :mod:`drake_abs.multibody`: scenes, MultibodyPlant/pinocchio dynamics, the batched rigid-body
+  step (the only core subpackage that needs pydrake and pinocchio).
+
+On top: Drake systems in :mod:`drake_abs.systems`, diagram builders in :mod:`drake_abs.diagrams`,
+experiments and the CLI in :mod:`drake_abs.experiments`. The names below are the most used ones.
 
 Direction of smoothing, everywhere in this package: **a larger mu means more smoothing**;
 ``mu = 0`` is hard contact.
@@ -20,8 +31,11 @@ import sys
 if "numpy" not in sys.modules:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from drake_abs.closed_form import softened_lcp_1d
-from drake_abs.ipm import (
+from drake_abs.contact.lcs import LCS, StepResult
+from drake_abs.contact.rollout import Rollout, rollout
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.lcp.closed_form import softened_lcp_1d
+from drake_abs.lcp.ipm import (
     LCPConvergenceError,
     LCPConvergenceWarning,
     LCPRegularizationWarning,
@@ -29,11 +43,8 @@ from drake_abs.ipm import (
     LCPStatus,
     solve_lcp,
 )
-from drake_abs.lcs import LCS, StepResult
-from drake_abs.matrix_class import MatrixClass
-from drake_abs.point_mass import point_mass_lcs
-from drake_abs.rollout import Rollout, rollout
-from drake_abs.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.lcp.matrix_class import MatrixClass
+from drake_abs.tasks.point_mass import point_mass_lcs
 
 __all__ = [
     "LCS",

@@ -4,7 +4,7 @@ contact before the goal; learning curves of ZOPG, FOPG (exact), FOPG-BS and FOPG
 The task (ours; the paper's Appendix C.2 illustration is not in the text we have): a ball of
 radius 5 cm and 1 kg is thrown from 1 m (its centre) at a fixed speed of 3 m/s; it lands
 inelastically on ground with Coulomb friction 0.4, slides and stops. The ball translates only
-(it is :class:`~drake_abs.box_lcs.TranslatingBox`: it slides, it does not roll). The policy is
+(it is :class:`~drake_abs.tasks.box_lcs.TranslatingBox`: it slides, it does not roll). The policy is
 the throwing angle theta (rad above the horizontal); exploration is Gaussian on the angle,
 ``a = theta + sigma xi``. The return is ``-(p_x(T) - goal)^2`` (m^2) at the end of the horizon,
 when the ball has come to rest; every throw lands well before the goal, so the contact (the
@@ -16,7 +16,7 @@ The throw fits the policy-gradient engine as a closed loop of H steps: the state
 ``speed (cos u, sin u)`` and from then on steps the ball's LCS, ignoring the input. So the
 exploration noise of later steps has no effect, and ZOPG's score reduces to the first step's.
 
-Estimators (drake_abs.estimators), each trained with Adam from the same initial angle and the
+Estimators (drake_abs.policy.estimators), each trained with Adam from the same initial angle and the
 same five seeds: ZOPG (likelihood ratio on the exact model), FOPG on the exact model, FOPG-BS
 (one fixed mu) and FOPG-ABS (contact-aware mu). Every run is evaluated each iteration by the
 deterministic return (no exploration) of the exact model, the true objective; the curves are
@@ -33,13 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.box_lcs import TranslatingBox
-from drake_abs.estimators import PolicyObjective, first_order, zeroth_order
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.policy_rollout import LcsStepper, rollout_policy
-from drake_abs.rewards import QuadraticReward
-from drake_abs.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
-from drake_abs.training import Adam, train
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.policy.estimators import PolicyObjective, first_order, zeroth_order
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollout import LcsStepper, rollout_policy
+from drake_abs.policy.training import Adam, train
+from drake_abs.tasks.box_lcs import TranslatingBox
 
 METHODS = ("ZOPG", "FOPG", "FOPG-BS", "FOPG-ABS")
 
@@ -110,7 +110,7 @@ class ThrowPolicy:
 
 @dataclass(frozen=True)
 class ThrowStep:
-    """One batched throw step (the fields :class:`~drake_abs.policy_rollout.Stepper` needs)."""
+    """One batched throw step (the fields :class:`~drake_abs.policy.rollout.Stepper` needs)."""
 
     x_next: np.ndarray
     converged: np.ndarray

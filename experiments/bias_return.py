@@ -22,8 +22,8 @@ rollouts of training use the design's own (softened) dynamics, as Algorithm 1 do
   noise (common random numbers across designs and iterations), every ``eval_every`` iterations;
   mean and spread (standard deviation, min, max) over seeds;
 - at the ``checkpoints``, the design's FOPG **variance** and **bias** against the exact
-  objective's reference gradient at the current theta (:mod:`drake_abs.gradient_stats`: a bias
-  below the noise of the measurement is reported as unresolved, not as a number).
+  objective's reference gradient at the current theta (:mod:`drake_abs.policy.gradient_stats`:
+  a bias below the noise of the measurement is reported as unresolved, not as a number).
 
 A training run whose rollouts leave the finite numbers stops there and is reported
 (``diverged_at``, seed: iteration); the return statistics are then over the seeds still running
@@ -42,13 +42,13 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.estimators import PolicyObjective, first_order
-from drake_abs.gradient_stats import measure_bias, measure_variance, reference_gradient
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.policies import LinearPolicy
-from drake_abs.rewards import QuadraticReward
-from drake_abs.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
-from drake_abs.training import Adam, train
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.policy.estimators import PolicyObjective, first_order
+from drake_abs.policy.gradient_stats import measure_bias, measure_variance, reference_gradient
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.training import Adam, train
 
 DESIGNS: dict[str, SmoothingPolicy] = {
     "BS mu=1e-10": Fixed(1e-10),
@@ -143,7 +143,7 @@ class Task:
         if name == "hopping_ball":
             from drake_abs import point_mass_lcs
             from drake_abs.experiments.gradient_variance import TIME_STEP, spring_theta
-            from drake_abs.policy_rollout import LcsStepper
+            from drake_abs.policy.rollout import LcsStepper
 
             lcs = point_mass_lcs(2, time_step=TIME_STEP)
             self._stepper = lambda s: LcsStepper(lcs, s)
@@ -157,15 +157,10 @@ class Task:
             self.theta0 = spring_theta()
             self.sigma = 1.0
         else:
-            from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-            from drake_abs.scene import Scene
-            from drake_abs.systems import ComplementarityStepper
+            from drake_abs.multibody import build_scene_model
 
-            scene = Scene.from_yaml(PACKAGE_DIR / "scenes" / "half_cheetah.yaml")
-            model = build_scene_model(scene)
-            self._stepper = lambda s: ComplementarityStepper(
-                model.contact_model, s, activation_distance=scene.activation_distance
-            )
+            model = build_scene_model("half_cheetah")
+            self._stepper = lambda s: model.stepper(smoothing=s)
             nq, nv = len(model.q0), len(model.v0)
             nu = model.plant.num_actuators()
             self.x0 = np.concatenate([model.q0, model.v0])

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.scene import Scene
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.multibody.scene import Scene
 
 _BOX_SDF = """<?xml version="1.0"?>
 <sdf version="1.9">
@@ -105,14 +105,11 @@ def box_scene(folder: Path, friction: float, mass: float, ratio: float, h: float
 
 def run_case(scene: Scene, steps: int, push: float) -> dict:
     """Step one scene; per-step convergence and iterations."""
-    from drake_abs.diagrams.scene_builder import build_scene_model
-    from drake_abs.systems import ComplementarityStepper
+    from drake_abs.multibody import build_scene_model
 
     sm = build_scene_model(scene)
-    stepper = ComplementarityStepper(
-        sm.contact_model, scene.smoothing_policy(), activation_distance=scene.activation_distance
-    )
-    x = np.concatenate([sm.q0, sm.v0])[None]
+    stepper = sm.stepper()
+    x = sm.x0[None]
     u = np.array([[push]])
     converged, iterations = [], []
     with warnings.catch_warnings():

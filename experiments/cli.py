@@ -58,9 +58,9 @@ def _run_standard(module_name: str, out: Path, *, test_size: bool) -> int:
 
 
 def _record(scene_arg: str, steps: int, out: str | None) -> int:
-    from drake_abs.diagrams.scene_builder import PACKAGE_DIR
     from drake_abs.diagrams.scene_visualization import record_scene
-    from drake_abs.scene import Scene
+    from drake_abs.multibody.builder import PACKAGE_DIR
+    from drake_abs.multibody.scene import Scene
 
     path = Path(scene_arg)
     if not path.is_file():

@@ -180,7 +180,7 @@ def build_drake_model(
     from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_abs.diagrams.scene_builder import PACKAGE_DIR
+    from drake_abs.multibody.builder import PACKAGE_DIR
 
     if scene not in ("box", "ball"):
         raise ValueError(f"scene must be 'box' or 'ball'; got {scene!r}")
@@ -286,9 +286,10 @@ def drake_gradients(model: DrakeModel, x0, u, steps: int) -> dict:
 
 
 def our_scene(scene: str, time_step: float, config: ComparisonConfig, policy: str):
-    """Scene ``"box"`` or ``"ball"`` as a :class:`drake_abs.scene.Scene` under ``policy``."""
-    from drake_abs.diagrams.scene_builder import PACKAGE_DIR
-    from drake_abs.scene import Scene
+    """Scene ``"box"`` or ``"ball"`` as a :class:`drake_abs.multibody.scene.Scene` under
+    ``policy``."""
+    from drake_abs.multibody.builder import PACKAGE_DIR
+    from drake_abs.multibody.scene import Scene
 
     i = 0 if scene == "box" else 1
     # mu is impulse x distance and a step's impulses scale with h: scale mu with h so that a
@@ -325,13 +326,9 @@ def our_scene(scene: str, time_step: float, config: ComparisonConfig, policy: st
 
 def our_stepper(scene: str, time_step: float, config: ComparisonConfig, policy: str):
     """The complementarity stepper of a scene (``total`` gradients: ABS's dmu/dz included)."""
-    from drake_abs.diagrams.scene_builder import build_scene_model
+    from drake_abs.multibody import make_stepper
 
-    sc = our_scene(scene, time_step, config, policy)
-    model = build_scene_model(sc).contact_model
-    from drake_abs.systems import ComplementarityStepper
-
-    return ComplementarityStepper(model, sc.smoothing_policy(), "total", sc.activation_distance)
+    return make_stepper(our_scene(scene, time_step, config, policy), gradient="total")
 
 
 def our_rollout(stepper, x0, u, steps: int, *, jacobians: bool) -> dict:

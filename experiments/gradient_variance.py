@@ -12,9 +12,9 @@ number of impacts grows with the horizon. The reward tracks p_y = 0.2 m. theta =
 For each horizon H and smoothing policy (Exact, BS with fixed mu over several decades, ABS
 contact-aware, ABS Gaussian-matched; the adaptive ones in both gradient modes) the FOPG variance
 ``v = E||g - E g||^2`` is measured from repeated independent batches of M rollouts
-(:func:`drake_abs.gradient_stats.variance_bias_sweep`; every policy at one H sees the same
+(:func:`drake_abs.policy.gradient_stats.variance_bias_sweep`; every policy at one H sees the same
 noise), and the bias against the exact objective's reference gradient (first- and zeroth-order,
-many samples, see :func:`drake_abs.gradient_stats.reference_gradient`).
+many samples, see :func:`drake_abs.policy.gradient_stats.reference_gradient`).
 
 Per policy, two fits of the measured variance over H >= ``fit_from``: exponential
 (``log v = a + r H``, the paper's claim; r per step) and power law (``log v = a + p log H``);
@@ -35,12 +35,12 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs import point_mass_lcs
-from drake_abs.estimators import PolicyObjective
-from drake_abs.gradient_stats import fopg, variance_bias_sweep
-from drake_abs.policies import LinearPolicy
-from drake_abs.policy_rollout import LcsStepper
-from drake_abs.rewards import QuadraticReward
-from drake_abs.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.policy.estimators import PolicyObjective
+from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollout import LcsStepper
 
 
 @dataclass(frozen=True)

@@ -3,13 +3,13 @@
 1. System identification: 100 closed-loop trajectories near the target under a stabilising MPC
    (built on the exact hover linearisation; the policy itself never uses it), inputs perturbed
    by Gaussian noise and clipped to [0, 630] rad/s; (A, B) by least squares in deviations from
-   (x_ref, u_ref) (:mod:`drake_abs.sysid`).
+   (x_ref, u_ref) (:mod:`drake_abs.mpc.sysid`).
 2. The policy: QP-MPC with the identified model, N = 12, slack penalty 25 (linear and
    quadratic), theta = (p_Q, p_R, p_P) initialised at Q = Qc, R = Rc and P from the Riccati
    equation of the identified model (docs/math.md section 9).
 3. Closed loop on the nonlinear quadcopter from x_0 (the paper does not state it; we take the
    origin at hover) to x_ref = (-6, -3.5, 0, 0..) over T = 200 steps; cost C and penalty
-   300 dist_1 (:mod:`drake_abs.graybox`).
+   300 dist_1 (:mod:`drake_abs.mpc.graybox`).
 4. 200 gray-box iterations (eq. 10) for gamma = 0.25, 0.5, 0.75, eta = 1 (model only) and
    eta = 0 (zeroth order only), all from the same theta_0 and with the same random directions;
    200 iterations with the exact gradient (the nonlinear model's own Jacobians in eq. 8a) and
@@ -23,7 +23,7 @@ The suboptimality of the trained controller (gamma = 0.5, fixed before running) 
 reference is reported beside the paper's 1111.71 vs 1103.04. Every rollout's MPC statuses are
 counted (fallback and inaccurate steps) and reported per method.
 
-Step sizes: see :mod:`drake_abs.graybox` (the printed formula is checked and reported too).
+Step sizes: see :mod:`drake_abs.mpc.graybox` (the printed formula is checked and reported too).
 """
 
 from __future__ import annotations
@@ -35,8 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs import quadcopter as qc
-from drake_abs.graybox import (
+from drake_abs.mpc.graybox import (
     ClosedLoopResult,
     GrayBoxResult,
     Schedule,
@@ -45,8 +44,9 @@ from drake_abs.graybox import (
     graybox_optimize,
     step_size_as_printed,
 )
-from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
-from drake_abs.sysid import LinearModel, identify_linear_model
+from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.mpc.sysid import LinearModel, identify_linear_model
+from drake_abs.tasks import quadcopter as qc
 
 PAPER_TRAINED_COST = 1111.71
 PAPER_EXACT_MODEL_COST = 1103.04
@@ -366,7 +366,7 @@ def run(config: Config | None = None, out: str | Path = "results/mpc-quadcopter"
     if config.exact_model:
         reference, reference_info = _exact_reference(problem, config)
 
-    # the printed step-size formula, one model-based step from theta_0 (see drake_abs.graybox)
+    # the printed step-size formula, one model-based step from theta_0 (see drake_abs.mpc.graybox)
     evaluate = _Counting(problem, "model", config.steps)
     r0 = evaluate(problem.theta0, True)
     theta1 = np.clip(

@@ -43,19 +43,15 @@ def _lcs() -> None:
 
 
 def _scenes() -> None:
-    from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-    from drake_abs.scene import Scene
-    from drake_abs.systems import ComplementarityStepper
+    from drake_abs.contact.smoothing import Exact
+    from drake_abs.multibody import build_scene_model
 
     for name in ("box_push", "hopper"):
-        scene = Scene.from_yaml(PACKAGE_DIR / "scenes" / f"{name}.yaml")
-        model = build_scene_model(scene)
-        x = np.r_[model.q0, model.v0]
+        model = build_scene_model(name)
+        x = model.x0
         u = np.zeros(model.contact_model.nu)
-        for policy in (None, scene.smoothing_policy()):
-            stepper = ComplementarityStepper(
-                model.contact_model, policy, activation_distance=scene.activation_distance
-            )
+        for policy in (Exact(), None):  # exact, and the scene's own smoothing
+            stepper = model.stepper(smoothing=policy)
             for jac in (False, True):
                 stepper.step(x[None], u, jacobians=jac)  # one state: the shared-kinematics path
                 stepper.step(np.tile(x, (3, 1)), u, jacobians=jac)  # a batch

@@ -1,11 +1,11 @@
 """Paper 000 Figure 6: barrier smoothing (BS) against randomised smoothing (RS) on impact contact
 (a dropped ball) and on frictional contact (a pushed box).
 
-(a) Impact. A ball (:func:`~drake_abs.point_mass.point_mass_lcs`, 1-D, 1 kg, h = 0.01 s) starts
-at height y0 moving down at ``drop_speed``; f(y0) = its vertical velocity after ``impact_steps``
-steps. Balls starting below the contact height y_c have landed (v = 0, inelastic), those above
-are still falling, so f jumps by dv = -(v0 - g T) at y_c: the ground-truth derivative is an
-impulse of mass dv at y_c (in discrete time a ramp of slope -1/h and width ~|v| h) and 0
+(a) Impact. A ball (:func:`~drake_abs.tasks.point_mass.point_mass_lcs`, 1-D, 1 kg, h = 0.01 s)
+starts at height y0 moving down at ``drop_speed``; f(y0) = its vertical velocity after
+``impact_steps`` steps. Balls starting below the contact height y_c have landed (v = 0, inelastic),
+those above are still falling, so f jumps by dv = -(v0 - g T) at y_c: the ground-truth derivative is
+an impulse of mass dv at y_c (in discrete time a ramp of slope -1/h and width ~|v| h) and 0
 elsewhere. Compared over a grid of y0:
 
 - GT: the exact model's derivative (the rollout Jacobian, which resolves the ramp).
@@ -17,7 +17,7 @@ elsewhere. Compared over a grid of y0:
 - RS, zeroth-order: ``(1/N) sum_i (f(y0 + w_i) - f(y0)) w_i / sigma^2`` (Gaussian finite
   differences), unbiased for the same smoothed derivative, but noisy.
 
-(b) Friction. The translating box (:class:`~drake_abs.box_lcs.TranslatingBox`, 1 kg, friction
+(b) Friction. The translating box (:class:`~drake_abs.tasks.box_lcs.TranslatingBox`, 1 kg, friction
 0.5) rests on the ground and is pushed by a constant force u (N) for ``push_steps`` steps;
 f(u) = its final position. Below the threshold alpha m g it does not move (f' = 0); above, f'
 is the constant sum of h^2 (T - t) / m. The gradient df/du by the exact model (GT), by BS
@@ -39,11 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.box_lcs import TranslatingBox
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.point_mass import point_mass_lcs
-from drake_abs.rollout import rollout
-from drake_abs.smoothing import Fixed
+from drake_abs.contact.rollout import rollout
+from drake_abs.contact.smoothing import Fixed
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.tasks.box_lcs import TranslatingBox
+from drake_abs.tasks.point_mass import point_mass_lcs
 
 G = 9.81
 

@@ -12,8 +12,8 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs.lcs import LCS, GradientMode, check_gradient_mode
-from drake_abs.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.lcs import LCS, GradientMode, check_gradient_mode
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.systems import autodiff
 
 

@@ -1,6 +1,6 @@
 """The differentiable QP-MPC policy (paper 003 eq. 4) as a Drake system.
 
-Every evaluation calls :meth:`drake_abs.qp_mpc.QpMpc.solve`, the same code the core closed loop
+Every evaluation calls :meth:`drake_abs.mpc.qp_mpc.QpMpc.solve`, the same code the core closed loop
 runs. Under AutoDiffXd the QP is solved in double and the KKT Jacobians du0/dx and du0/dtheta
 are chained onto the derivatives that x (input port) and theta (numeric parameter) carry in, so a
 diagram of plant + controller + cost differentiates as a whole with respect to the initial state
@@ -20,7 +20,7 @@ from pydrake.systems.framework import (
 )
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc
+from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc
 from drake_abs.systems import autodiff
 
 STATUS_FIELDS = ("status", "fallback", "iterations")
@@ -43,7 +43,7 @@ def MpcController_(T):
         Input ``x`` (nx,): the measured state (absolute units). Output ``u`` (nu,): u_0 of the
         QP (absolute units); when the QP is not solved, the documented fallback
         clip(u_ref, u_min, u_max), never NaN. Output ``status`` (3,): the
-        :class:`~drake_abs.qp_mpc.MpcStatus` code (0 = solved), 1.0 if the fallback was
+        :class:`~drake_abs.mpc.qp_mpc.MpcStatus` code (0 = solved), 1.0 if the fallback was
         applied, and OSQP's iteration count (these carry no derivatives).
 
         The cost parameters theta (n_theta,) (docs/math.md section 9) are a numeric parameter of the

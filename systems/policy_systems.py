@@ -2,9 +2,10 @@
 so that a plant + policy + reward diagram differentiates as a whole with respect to the policy
 parameters (issue 4; paper 000 eq. 4.1).
 
-Every system computes in double with the core's code (:mod:`drake_abs.policies`,
-:mod:`drake_abs.rewards`) and, under AutoDiffXd, chains the core's Jacobians onto the incoming
-derivatives (of the state, the input and the policy parameters), like the plants of this package.
+Every system computes in double with the core's code (:mod:`drake_abs.policy.policies`,
+:mod:`drake_abs.policy.rewards`) and, under AutoDiffXd, chains the core's Jacobians onto the
+incoming derivatives (of the state, the input and the policy parameters), like the plants of this
+package.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ def _value(x) -> float:
 @TemplateSystem.define("PolicyController_", T_list=[float, AutoDiffXd])
 def PolicyController_(T):
     class Impl(LeafSystem_[T]):
-        """``u = pi(x; theta) + sigma xi``: a policy of :mod:`drake_abs.policies` with its
+        """``u = pi(x; theta) + sigma xi``: a policy of :mod:`drake_abs.policy.policies` with its
         parameters theta held as the Context's numeric parameter 0 (set them with
         :meth:`SetTheta`; under AutoDiffXd they may carry derivatives).
 
@@ -138,7 +139,7 @@ def RewardAccumulator_(T):
             - return
 
         Args:
-            reward: a reward of :mod:`drake_abs.rewards` (stage, terminal).
+            reward: a reward of :mod:`drake_abs.policy.rewards` (stage, terminal).
             time_step: h in s (the plant's).
         """
 

@@ -1,7 +1,8 @@
 """The 12-state quadcopter (paper 003 section 7) as a Drake discrete-time system.
 
-Every step calls :func:`drake_abs.quadcopter.step`, the same code the core runs. Under AutoDiffXd
-the step is taken in double and its analytic Jacobians are chained onto the incoming derivatives.
+Every step calls :func:`drake_abs.tasks.quadcopter.step`, the same code the core runs. Under
+AutoDiffXd the step is taken in double and its analytic Jacobians are chained onto the incoming
+derivatives.
 """
 
 from __future__ import annotations
@@ -11,9 +12,9 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs import quadcopter
-from drake_abs.quadcopter import NU, NX, QuadcopterParams
 from drake_abs.systems import autodiff
+from drake_abs.tasks import quadcopter
+from drake_abs.tasks.quadcopter import NU, NX, QuadcopterParams
 
 
 @TemplateSystem.define("QuadcopterPlant_", T_list=[float, AutoDiffXd])
@@ -31,7 +32,7 @@ def QuadcopterPlant_(T):
 
         Discrete state and output ``state``: x (12,) = (position (m), velocity (m/s), roll,
         pitch, yaw (rad, Z-Y-X), body rates (rad/s)); input ``u``: the four rotor speeds (rad/s).
-        Conventions in :mod:`drake_abs.quadcopter`.
+        Conventions in :mod:`drake_abs.tasks.quadcopter`.
 
         Args:
             params: physical constants and time step (default :class:`QuadcopterParams`).

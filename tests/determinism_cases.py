@@ -52,19 +52,12 @@ def lcs_rollout() -> str:
 
 def scene_step() -> str:
     """The frictional box scene (pinocchio dynamics): a batch and a single state, Jacobians."""
-    from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-    from drake_abs.scene import Scene
-    from drake_abs.systems import ComplementarityStepper
+    from drake_abs.multibody import build_scene_model
 
-    scene = Scene.from_yaml(PACKAGE_DIR / "scenes" / "box_push.yaml")
-    model = build_scene_model(scene)
-    stepper = ComplementarityStepper(
-        model.contact_model,
-        scene.smoothing_policy(),
-        activation_distance=scene.activation_distance,
-    )
+    model = build_scene_model("box_push")
+    stepper = model.stepper()
     rng = np.random.default_rng(2)
-    x0 = np.r_[model.q0, model.v0]
+    x0 = model.x0
     x = x0 + 0.01 * rng.standard_normal((16, x0.size))
     u = rng.standard_normal((16, model.contact_model.nu))
     batch = stepper.step(x, u)
@@ -77,7 +70,7 @@ def mpc_sequence() -> str:
     Jacobians, the same call sequence every time."""
     from mpc_setup import A_H, B_H, THETA, U_MAX, U_MIN, U_REF, X_MAX, X_MIN, X_REF
 
-    from drake_abs.qp_mpc import MpcSpec, QpMpc
+    from drake_abs.mpc.qp_mpc import MpcSpec, QpMpc
 
     mpc = QpMpc(MpcSpec(A_H, B_H, 12, X_REF, U_REF, U_MIN, U_MAX, X_MIN, X_MAX), THETA)
     rng = np.random.default_rng(3)
@@ -91,10 +84,10 @@ def mpc_sequence() -> str:
 def policy_gradient() -> str:
     """A seeded first-order estimate on the bouncing point mass under adaptive smoothing."""
     from drake_abs import ContactAware, point_mass_lcs
-    from drake_abs.estimators import PolicyObjective, first_order
-    from drake_abs.policies import LinearPolicy
-    from drake_abs.policy_rollout import LcsStepper
-    from drake_abs.rewards import QuadraticReward
+    from drake_abs.policy.estimators import PolicyObjective, first_order
+    from drake_abs.policy.policies import LinearPolicy
+    from drake_abs.policy.rewards import QuadraticReward
+    from drake_abs.policy.rollout import LcsStepper
 
     lcs = point_mass_lcs(2, time_step=0.02)
     reward = QuadraticReward(np.diag([0.0, 1.0, 0.0, 0.01]), 0.01 * np.eye(2), np.r_[1, 0.2, 0, 0])

@@ -3,8 +3,8 @@ cost weights, the Riccati terminal cost and its theta, and the paper 003 constra
 
 import numpy as np
 
-from drake_abs import quadcopter as qc
-from drake_abs.qp_mpc import riccati_terminal_cost, theta_from_cost
+from drake_abs.mpc.qp_mpc import riccati_terminal_cost, theta_from_cost
+from drake_abs.tasks import quadcopter as qc
 
 PRM = qc.QuadcopterParams()
 A_H, B_H = qc.hover_linearization(PRM)

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from numdiff import central_difference
 
-from drake_abs.estimators import first_order
 from drake_abs.experiments import ball_throw as bt
-from drake_abs.policy_rollout import rollout_policy
-from drake_abs.training import Adam, train
+from drake_abs.policy.estimators import first_order
+from drake_abs.policy.rollout import rollout_policy
+from drake_abs.policy.training import Adam, train
 
 CONFIG = bt.Config.test_size()
 

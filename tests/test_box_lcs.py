@@ -1,4 +1,4 @@
-"""The translating box on frictional ground as an LCS (drake_abs.box_lcs).
+"""The translating box on frictional ground as an LCS (drake_abs.tasks.box_lcs).
 
 Checks: a sliding box stops where discrete Coulomb friction says (analytic); a push below the
 friction threshold does not move it (static friction) and one above accelerates it at
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from numdiff import central_difference
 
-from drake_abs.box_lcs import TranslatingBox
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.smoothing import ContactAware, Fixed
+from drake_abs.contact.smoothing import ContactAware, Fixed
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.tasks.box_lcs import TranslatingBox
 
 G = 9.81
 
@@ -97,9 +97,9 @@ def test_bad_parameters_raise():
     "contact", [None, Fixed(1e-4), ContactAware(mu_max=1e-3, length=0.02)], ids=str
 )
 def test_lcs_box_equals_the_rigid_body_stepper_on_the_translating_box(contact):
-    from drake_abs.diagrams.scene_builder import build_scene_model
-    from drake_abs.scene import Scene
-    from drake_abs.systems import ComplementarityStepper
+    from drake_abs.multibody import ComplementarityStepper
+    from drake_abs.multibody.builder import build_scene_model
+    from drake_abs.multibody.scene import Scene
 
     box = TranslatingBox()  # the SDF's 1 kg, 0.2 m tall box
     scene = Scene.from_dict(

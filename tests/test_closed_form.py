@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from drake_abs import solve_lcp
-from drake_abs.closed_form import (
+from drake_abs.lcp.closed_form import (
     softened_lcp_1d,
     softened_lcp_1d_dlam_dmu,
     softened_lcp_1d_dlam_dz,

@@ -7,7 +7,7 @@ import pytest
 from numdiff import central_difference
 
 from drake_abs import ContactAware, Exact, Fixed, solve_lcp
-from drake_abs.contact_lcp import FrictionCone, StepQuantities, assemble_lcp, contact_step
+from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities, assemble_lcp, contact_step
 
 H = 0.01
 CORNERS = np.array([[-0.2, -0.1], [0.2, -0.1]])  # box-frame corners touching the ground

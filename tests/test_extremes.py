@@ -18,7 +18,7 @@ from drake_abs import (
     point_mass_lcs,
     solve_lcp,
 )
-from drake_abs.closed_form import softened_lcp_1d, softened_lcp_1d_dlam_dz
+from drake_abs.lcp.closed_form import softened_lcp_1d, softened_lcp_1d_dlam_dz
 
 MUS = [0.0, 1e-14, 1e-10, 1e-6, 1e-2, 1.0, 1e3]
 Q_SCALES = [1e-8, 1.0, 1e4, 1e8]

@@ -1,4 +1,4 @@
-"""Variance and bias measurement of gradient estimators (drake_abs.gradient_stats).
+"""Variance and bias measurement of gradient estimators (drake_abs.policy.gradient_stats).
 
 Checks: the trace variance and its standard error against a linear-Gaussian problem whose FOPG
 variance is known in closed form; the reference gradient against the analytic gradient there;
@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from drake_abs import Exact, Fixed
-from drake_abs.estimators import GradientEstimate, PolicyObjective, first_order
+from drake_abs.contact.lcs import LCS
 from drake_abs.experiments.gradient_variance import hopping_ball, spring_theta
-from drake_abs.gradient_stats import (
+from drake_abs.policy.estimators import GradientEstimate, PolicyObjective, first_order
+from drake_abs.policy.gradient_stats import (
     fopg,
     measure_bias,
     measure_variance,
@@ -23,10 +24,9 @@ from drake_abs.gradient_stats import (
     trace_variance,
     variance_bias_sweep,
 )
-from drake_abs.lcs import LCS
-from drake_abs.policies import LinearPolicy
-from drake_abs.policy_rollout import LcsStepper
-from drake_abs.rewards import QuadraticReward
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollout import LcsStepper
 
 C0, GOAL, Q, SIGMA = 0.5, 2.0, 3.0, 0.7  # x0, target, terminal weight, action noise
 
@@ -194,8 +194,8 @@ def test_bad_input_is_named():
 def test_exactness_and_constancy_are_asked_of_the_policy_not_its_class():
     """A wrapped policy (the box's per-contact rows) answers for the policy it wraps: the exact
     box objective is accepted as a reference, a smoothed one is refused."""
-    from drake_abs.box_lcs import TranslatingBox
-    from drake_abs.smoothing import ContactAware
+    from drake_abs.contact.smoothing import ContactAware
+    from drake_abs.tasks.box_lcs import TranslatingBox
 
     box = TranslatingBox(mass=1.0, half_height=0.1, friction=0.5, time_step=0.01)
     assert box.smoothing().is_exact and box.smoothing().is_constant

@@ -1,4 +1,4 @@
-"""The interior-point method's rate near the solution (drake_abs.ipm docstring, step 4)."""
+"""The interior-point method's rate near the solution (drake_abs.lcp.ipm docstring, step 4)."""
 
 import warnings
 

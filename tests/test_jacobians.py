@@ -17,7 +17,7 @@ from drake_abs import (
     rollout,
     solve_lcp,
 )
-from drake_abs.sensitivity import dlam_dF
+from drake_abs.lcp.sensitivity import dlam_dF
 
 POLICIES = [
     Exact(),

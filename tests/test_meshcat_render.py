@@ -12,14 +12,14 @@ import pytest
 from PIL import Image
 from pydrake.geometry import Meshcat, MeshcatParams
 
-from drake_abs.diagrams.model_files import read_stl, stl_to_obj, visual_only_model_text
-from drake_abs.diagrams.scene_builder import PACKAGE_DIR
 from drake_abs.diagrams.scene_visualization import (
     record_rollout_html,
     record_scene,
     rollout_states,
 )
-from drake_abs.scene import Scene
+from drake_abs.multibody.builder import PACKAGE_DIR
+from drake_abs.multibody.model_files import read_stl, stl_to_obj, visual_only_model_text
+from drake_abs.multibody.scene import Scene
 
 SCENES = sorted((PACKAGE_DIR / "scenes").glob("*.yaml"))
 STEPS = 20

@@ -24,16 +24,16 @@ from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from drake_abs import quadcopter as qc
 from drake_abs.diagrams.quadcopter_mpc import (
     ClosedLoopCost_,
     make_quadcopter_mpc_diagram,
     simulate_closed_loop,
 )
-from drake_abs.graybox import TrackingCost, closed_loop
-from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc
+from drake_abs.mpc.graybox import TrackingCost, closed_loop
+from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc
 from drake_abs.systems import autodiff
 from drake_abs.systems.mpc_controller import MpcController, MpcController_, status_name
+from drake_abs.tasks import quadcopter as qc
 
 P_C = np.diag(np.r_[np.ones(6), 1e3 * np.ones(3), np.ones(3)])
 COST = TrackingCost(np.diag(Q_D), np.diag(R_D), P_C, X_REF, U_REF, X_MIN, X_MAX, 300.0)

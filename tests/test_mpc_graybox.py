@@ -19,8 +19,7 @@ from mpc_setup import (
 )
 from numdiff import central_difference
 
-from drake_abs import quadcopter as qc
-from drake_abs.graybox import (
+from drake_abs.mpc.graybox import (
     LinearPlant,
     Schedule,
     TrackingCost,
@@ -31,8 +30,9 @@ from drake_abs.graybox import (
     step_size_as_printed,
     zeroth_order_estimate,
 )
-from drake_abs.qp_mpc import MpcSpec, MpcStatus, QpMpc
-from drake_abs.sysid import identify_linear_model
+from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc
+from drake_abs.mpc.sysid import identify_linear_model
+from drake_abs.tasks import quadcopter as qc
 
 COST = TrackingCost(
     np.diag(Q_D), np.diag(R_D), np.diag(np.r_[np.ones(6), 1e3 * np.ones(3), np.ones(3)]),

@@ -19,9 +19,8 @@ from mpc_setup import (
 )
 from numdiff import central_difference
 
-from drake_abs import quadcopter as qc
-from drake_abs.graybox import LinearPlant
-from drake_abs.qp_mpc import (
+from drake_abs.mpc.graybox import LinearPlant
+from drake_abs.mpc.qp_mpc import (
     MpcSpec,
     MpcStatus,
     QpMpc,
@@ -29,6 +28,7 @@ from drake_abs.qp_mpc import (
     cost_matrices,
     theta_from_cost,
 )
+from drake_abs.tasks import quadcopter as qc
 
 
 def paper_spec(**kw) -> MpcSpec:

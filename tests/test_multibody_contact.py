@@ -8,8 +8,8 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import BaseBodyJointType, MultibodyPlant
 
 from drake_abs import ContactAware, Exact, Fixed
-from drake_abs.contact_lcp import contact_step
-from drake_abs.systems.multibody_quantities import (
+from drake_abs.contact.contact_lcp import contact_step
+from drake_abs.multibody.drake_dynamics import (
     GroundPlane,
     MultibodyContactModel,
     PointContact,

@@ -11,14 +11,14 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BallRpyJoint, SpatialInertia, UnitInertia
 
-from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-from drake_abs.scene import Scene
-from drake_abs.systems.multibody_quantities import (
+from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.drake_dynamics import (
     GroundPlane,
     MultibodyContactModel,
     PointContact,
 )
-from drake_abs.systems.pinocchio_dynamics import PinocchioContactModel
+from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
+from drake_abs.multibody.scene import Scene
 
 SCENES = sorted(p.stem for p in (PACKAGE_DIR / "scenes").glob("*.yaml"))
 FIELDS = ("W", "v_free", "phi", "Jn", "Jt", "N", "dv_free", "dphi", "dJn", "dJt", "dN")

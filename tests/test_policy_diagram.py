@@ -10,12 +10,13 @@ import pytest
 from drake_abs import ContactAware, Fixed, point_mass_lcs
 from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
-from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-from drake_abs.policies import LinearPolicy, MLPPolicy
-from drake_abs.policy_rollout import LcsStepper, rollout_policy
-from drake_abs.rewards import QuadraticReward
-from drake_abs.scene import Scene
-from drake_abs.systems import ComplementarityPlant, ComplementarityStepper, LcsPlant
+from drake_abs.multibody import ComplementarityStepper
+from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.scene import Scene
+from drake_abs.policy.policies import LinearPolicy, MLPPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollout import LcsStepper, rollout_policy
+from drake_abs.systems import ComplementarityPlant, LcsPlant
 
 H_STEP = 0.02
 

@@ -15,7 +15,7 @@ import pytest
 from numdiff import central_difference
 
 from drake_abs import ContactAware, Fixed, point_mass_lcs
-from drake_abs.estimators import (
+from drake_abs.policy.estimators import (
     PolicyObjective,
     alpha_order,
     ars,
@@ -23,10 +23,10 @@ from drake_abs.estimators import (
     randomized_smoothing,
     zeroth_order,
 )
-from drake_abs.policies import LinearPolicy, MLPPolicy
-from drake_abs.policy_rollout import LcsStepper, rollout_memory_bytes, rollout_policy
-from drake_abs.rewards import QuadraticReward
-from drake_abs.training import SGD, Adam, train
+from drake_abs.policy.policies import LinearPolicy, MLPPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollout import LcsStepper, rollout_memory_bytes, rollout_policy
+from drake_abs.policy.training import SGD, Adam, train
 
 NX, NU = 4, 2  # the 2-D point mass: x = (p_x, p_z, v_x, v_z), u = force
 

@@ -8,9 +8,9 @@ from numdiff import central_difference
 from pydrake.autodiffutils import InitializeAutoDiff
 from pydrake.math import RollPitchYaw
 
-from drake_abs import quadcopter as qc
 from drake_abs.systems import autodiff
 from drake_abs.systems.quadcopter_plant import QuadcopterPlant, QuadcopterPlant_
+from drake_abs.tasks import quadcopter as qc
 
 PRM = qc.QuadcopterParams()
 

@@ -9,9 +9,10 @@ from pydrake.systems.analysis import Simulator, Simulator_
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_abs import ContactAware, Exact, Fixed
-from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-from drake_abs.scene import Scene
-from drake_abs.systems import ComplementarityPlant, ComplementarityStepper, autodiff
+from drake_abs.multibody import ComplementarityStepper
+from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.scene import Scene
+from drake_abs.systems import ComplementarityPlant, autodiff
 
 BOX = PACKAGE_DIR / "scenes" / "box_push.yaml"
 

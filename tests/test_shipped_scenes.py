@@ -20,11 +20,11 @@ import pytest
 from numdiff import central_difference
 
 from drake_abs import ContactAware, Exact, Fixed
-from drake_abs.contact_lcp import contact_step
-from drake_abs.diagrams.scene_builder import PACKAGE_DIR, build_scene_model
-from drake_abs.ipm import LCPConvergenceWarning
-from drake_abs.scene import Scene
-from drake_abs.systems import ComplementarityStepper
+from drake_abs.contact.contact_lcp import contact_step
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.multibody import ComplementarityStepper
+from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.scene import Scene
 
 G = 9.81
 SCENES_DIR = PACKAGE_DIR / "scenes"
@@ -128,10 +128,7 @@ def rollout(name):
     """The scene's exact-contact rollout from its initial state: states (T + 1, nx), normal
     impulses (T, nc), iterations (T,)."""
     sm = scene_model(name)
-    scene = sm.scene
-    stepper = ComplementarityStepper(
-        sm.contact_model, Exact(), activation_distance=scene.activation_distance
-    )
+    stepper = sm.stepper(smoothing=Exact())
     policy = controller(name, sm)
     xs = [np.concatenate([sm.q0, sm.v0])]
     impulses, iterations = [], []
@@ -290,7 +287,7 @@ def test_step_jacobian_matches_finite_differences(name, label, policy):
     sm = scene_model(name)
     model, scene = sm.contact_model, sm.scene
     smoothing = Exact() if policy == "exact" else contact_aware(sm)
-    stepper = ComplementarityStepper(model, smoothing, "total", scene.activation_distance)
+    stepper = sm.stepper(smoothing=smoothing, gradient="total")
     x, u = FD_STATES[name][label]()
     nx = x.size
     r = stepper.step(x[None], u[None])
@@ -322,13 +319,11 @@ def test_overflowing_dynamics_are_flagged_not_passed_as_converged():
     """The half-cheetah has no joint damping or limits: under large random torques its light feet
     spin up and the explicit Coriolis terms diverge (measured: |x| ~ 1e26 within 20 steps). A
     step that overflows must come back flagged, with a warning, not as a converged result."""
-    from drake_abs.systems import StepOverflowWarning
+    from drake_abs.multibody import StepOverflowWarning
 
     scene = Scene.from_yaml(PACKAGE_DIR / "scenes" / "half_cheetah.yaml")
     sm = build_scene_model(scene)
-    stepper = ComplementarityStepper(
-        sm.contact_model, Fixed(1e-2), activation_distance=scene.activation_distance
-    )
+    stepper = sm.stepper(smoothing=Fixed(1e-2))
     rng = np.random.default_rng(0)
     x = np.tile(np.concatenate([sm.q0, sm.v0]), (4, 1))
     flagged = False

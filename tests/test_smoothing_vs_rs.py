@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from drake_abs.contact.smoothing import Fixed
 from drake_abs.experiments import smoothing_vs_rs as srs
-from drake_abs.smoothing import Fixed
 
 CONFIG = srs.Config.test_size()
 

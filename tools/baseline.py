@@ -50,6 +50,12 @@ TIMING = re.compile(
 )
 
 
+def _is_timing(key: str) -> bool:
+    """Entries that measure the clock (skipped by the comparison); a time *step* is a setting."""
+    k = key.lower().replace("time_step", "h")
+    return bool(TIMING.search(key.rsplit("/", 1)[-1].replace("time_step", "h")) or "time" in k)
+
+
 def _bin(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
@@ -91,7 +97,7 @@ def differences(old, new, rtol: float) -> list[str]:
     a, b = dict(_leaves(old)), dict(_leaves(new))
     bad = []
     for key in sorted(set(a) | set(b)):
-        if TIMING.search(key.rsplit("/", 1)[-1]) or "time" in key.lower():
+        if _is_timing(key):
             continue
         x, y = a.get(key, "missing"), b.get(key, "missing")
         if isinstance(x, float) and isinstance(y, float):
@@ -102,6 +108,24 @@ def differences(old, new, rtol: float) -> list[str]:
         elif x != y:
             bad.append(f"{key}: {x!r} -> {y!r}")
     return bad
+
+
+def timing_ratios(old, new) -> list[float]:
+    """new / old for every positive timing entry both have (what ``differences`` skips)."""
+    a, b = dict(_leaves(old)), dict(_leaves(new))
+    out = []
+    for key in set(a) & set(b):
+        name = key.rsplit("/", 1)[-1]
+        if (
+            not (TIMING.search(name) or "time" in key.lower())
+            or "ratio" in name
+            or "_over_" in name
+        ):
+            continue
+        x, y = a[key], b[key]
+        if isinstance(x, float) and isinstance(y, float) and x > 0 and y > 0:
+            out.append(y / x)
+    return sorted(out)
 
 
 def main() -> int:
@@ -126,7 +150,14 @@ def main() -> int:
         path = args.dir / f"{key}.json"
         old = json.loads(path.read_text()) if path.is_file() else "missing"
         bad = differences(old, value, args.rtol)
-        print(f"{key}: {'same' if not bad else f'{len(bad)} differences'}")
+        ratios = timing_ratios(old, value) if isinstance(old, dict) else []
+        clock = (
+            f"; {len(ratios)} timings, new/old median {ratios[len(ratios) // 2]:.2f}"
+            f" (range {ratios[0]:.2f} to {ratios[-1]:.2f})"
+            if ratios
+            else ""
+        )
+        print(f"{key}: {'same' if not bad else f'{len(bad)} differences'}{clock}")
         for line in bad[:20]:
             print("   ", line)
         failures += bool(bad)

@@ -2,25 +2,27 @@
 the box of paper 000 Figure 6b (and the ball of section 8.3 once it has landed).
 
 Without rotation the mass matrix ``M = m I`` and the contact Jacobians are constant, so the
-rigid-body time-stepping LCP of docs/math.md section 6 (:mod:`drake_abs.contact_lcp`) is affine in
-the state and input: it is an :class:`~drake_abs.lcs.LCS`. One contact, at the bottom of the
-body, with a linearised friction cone of k = 2 directions (+x, -x):
+rigid-body time-stepping LCP of docs/math.md section 6 (:mod:`drake_abs.contact.contact_lcp`) is
+affine in the state and input: it is an :class:`~drake_abs.contact.lcs.LCS`. One contact, at the
+bottom of the body, with a linearised friction cone of k = 2 directions (+x, -x):
 
     v+ = v + h (u e_x / m - g e_z) + (1/m) (e_z gamma + e_x (beta_1 - beta_2))      (N s)
     p+ = p + h v+
     lam = (gamma, beta_1, beta_2, omega)
 
-and the LCP rows, matrix F and offsets z are those of :func:`drake_abs.contact_lcp.assemble_lcp`
-(built by calling it, not re-derived here): normal (m), two friction rows (m/s) with the same
-tangential regularisation, and the cone row (N s).
+
+and the LCP rows, matrix F and offsets z are those of
+:func:`drake_abs.contact.contact_lcp.assemble_lcp` (built by calling it, not re-derived here):
+normal (m), two friction rows (m/s) with the same tangential regularisation, and the cone row (N s).
 
 State ``x = (p_x, p_z, v_x, v_z)`` (m, m/s; p_z is the height of the body's centre, the ground
 is z = 0), input ``u`` the horizontal push (N). The frictional F is copositive but not a
 P-matrix: the LCS is built with ``on_bad_matrix="attempt"`` (no matrix check; convergence is
-reported per step) and the contact solver defaults of :mod:`drake_abs.contact_lcp`.
+reported per step) and the contact solver defaults of
+:mod:`drake_abs.contact.contact_lcp`.
 
-Smoothing is applied per contact as :func:`drake_abs.contact_lcp.contact_step` applies it: the
-policy sees only the normal row (distance and compliance) and its mu (m N s; **larger is
+Smoothing is applied per contact as :func:`drake_abs.contact.contact_lcp.contact_step` applies it:
+the policy sees only the normal row (distance and compliance) and its mu (m N s; **larger is
 smoother**) is given to the normal row, mu / h to the friction and cone rows
 (:class:`PerContactSmoothing`). Use :meth:`TranslatingBox.stepper` to get the two together.
 """
@@ -31,16 +33,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_abs.contact_lcp import (
+from drake_abs.contact.contact_lcp import (
     CONTACT_SOLVER_DEFAULTS,
     FrictionCone,
     StepQuantities,
     assemble_lcp,
     expand_mu,
 )
-from drake_abs.lcs import LCS, GradientMode
-from drake_abs.policy_rollout import LcsStepper
-from drake_abs.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.lcs import LCS, GradientMode
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.policy.rollout import LcsStepper
 
 #: Tangent directions of the planar cone, in (x, z) velocity coordinates: +x, -x (the order of
 #: ``systems.multibody_quantities.tangent_directions`` for the normal +z and k = 2).
@@ -91,7 +93,7 @@ class TranslatingBox:
     Attributes:
         mass: kg. half_height: m. friction: Coulomb coefficient (>= 0). time_step: h in s.
         gravity: m/s^2. regularization: the cone's tangential compliance (see
-            :class:`~drake_abs.contact_lcp.FrictionCone`).
+            :class:`~drake_abs.contact.contact_lcp.FrictionCone`).
         lcs: the LCS (dx = 4, du = 1, d = 4), built at construction.
         cone: the friction cone (one contact, k = 2).
     """
@@ -172,7 +174,7 @@ class TranslatingBox:
     def stepper(
         self, contact: SmoothingPolicy | None = None, gradient: GradientMode = "frozen"
     ) -> LcsStepper:
-        """A batched :class:`~drake_abs.policy_rollout.LcsStepper` of this box."""
+        """A batched :class:`~drake_abs.policy.rollout.LcsStepper` of this box."""
         return LcsStepper(self.lcs, self.smoothing(contact), gradient)
 
     def resting_state(self, p_x: float = 0.0, v_x: float = 0.0) -> np.ndarray:

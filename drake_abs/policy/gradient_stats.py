@@ -40,9 +40,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_abs.estimators import GradientEstimate, PolicyObjective, first_order, zeroth_order
-from drake_abs.lcs import GradientMode, check_gradient_mode
-from drake_abs.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.lcs import GradientMode, check_gradient_mode
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.policy.estimators import GradientEstimate, PolicyObjective, first_order, zeroth_order
 
 #: ``estimator(theta, rng) -> GradientEstimate``: one estimate, all randomness from ``rng``.
 Estimator = Callable[[np.ndarray, np.random.Generator], GradientEstimate]

@@ -1,7 +1,7 @@
 """Policy optimisation: gradient ascent on J(theta) with Adam or SGD, a progress bar, seeds, and
 a JSON and CSV log of every iteration (paper 000 eq. 4.2).
 
-``estimator(theta, rng) -> GradientEstimate`` is any estimator of :mod:`drake_abs.estimators`
+``estimator(theta, rng) -> GradientEstimate`` is any estimator of :mod:`drake_abs.policy.estimators`
 with its sizes bound, e.g. ``lambda th, rng: first_order(obj, th, rng, 64)``.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from drake_abs.estimators import GradientEstimate
+from drake_abs.policy.estimators import GradientEstimate
 
 
 @dataclass

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_abs._validation import as_finite_array
-from drake_abs.lcs import LCS, GradientMode
-from drake_abs.smoothing import SmoothingPolicy
+from drake_abs.contact.lcs import LCS, GradientMode
+from drake_abs.contact.smoothing import SmoothingPolicy
 
 
 @dataclass(frozen=True)

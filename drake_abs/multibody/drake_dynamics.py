@@ -1,5 +1,5 @@
 """One step's dynamics quantities of a Drake MultibodyPlant with point contacts against a plane,
-with their derivatives, for the complementarity step of :mod:`drake_abs.contact_lcp`.
+with their derivatives, for the complementarity step of :mod:`drake_abs.contact.contact_lcp`.
 
 Values and derivatives come from one AutoDiffXd evaluation of the plant per state, seeded with
 the identity on p = (q, v, u): M(q), the bias and gravity terms, the actuation, the contact
@@ -18,7 +18,7 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, Ini
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 
-from drake_abs.contact_lcp import FrictionCone, StepQuantities
+from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
 
 
 @dataclass(frozen=True)
@@ -179,7 +179,7 @@ class ContactModelBase(ABC):
 
 
 class MultibodyContactModel(ContactModelBase):
-    """Evaluates :class:`~drake_abs.contact_lcp.StepQuantities` for a finalized continuous
+    """Evaluates :class:`~drake_abs.contact.contact_lcp.StepQuantities` for a finalized continuous
     MultibodyPlant (double) and a list of point contacts against one ground plane, through the
     plant itself (AutoDiffXd for derivatives). Any joint type. Arguments as
     :class:`ContactModelBase`.

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_abs.policy_rollout import PolicyRollout, Stepper, rollout_policy
+from drake_abs.policy.rollout import PolicyRollout, Stepper, rollout_policy
 
 
 @dataclass(frozen=True)
@@ -30,9 +30,9 @@ class PolicyObjective:
     """The stochastic objective: dynamics, policy, reward, initial state(s), horizon, noise.
 
     Args:
-        stepper: batched dynamics (:class:`~drake_abs.policy_rollout.Stepper`).
-        policy: a policy of :mod:`drake_abs.policies`.
-        reward: a reward of :mod:`drake_abs.rewards`.
+        stepper: batched dynamics (:class:`~drake_abs.policy.rollout.Stepper`).
+        policy: a policy of :mod:`drake_abs.policy.policies`.
+        reward: a reward of :mod:`drake_abs.policy.rewards`.
         x0: (nx,) initial state.
         horizon: H steps.
         sigma: exploration noise scale (units of u).

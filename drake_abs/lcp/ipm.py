@@ -9,7 +9,7 @@ stopping on the requested central-path point ``mu`` rather than at an arbitrary 
 the returned solution (and its implicit-function-theorem Jacobians) is the unique mu-softened
 solution. ``mu = 0`` solves the exact LCP (hard contact). **A larger mu means more smoothing.**
 
-Algorithm (per problem; the iterations are compiled in :mod:`drake_abs.ipm_kernel`, looped over
+Algorithm (per problem; the iterations are compiled in :mod:`drake_abs.lcp.ipm_kernel`, looped over
 the batch):
 
 1. Scale: ``F' = D^-1 F D^-1`` with ``D ~ sqrt(diag F)``, and ``q' = D^-1 q / c`` with
@@ -63,9 +63,9 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array
-from drake_abs.ipm_kernel import solve
-from drake_abs.matrix_class import MatrixClass, classify_matrix
-from drake_abs.sensitivity import implicit_jacobians
+from drake_abs.lcp.ipm_kernel import solve
+from drake_abs.lcp.matrix_class import MatrixClass, classify_matrix
+from drake_abs.lcp.sensitivity import implicit_jacobians
 
 OnBadMatrix = Literal["raise", "regularize", "attempt", "trusted"]
 
@@ -108,7 +108,7 @@ class LCPResult:
         status: (B,) :class:`LCPStatus` codes.
         residual: (B,) the convergence measure of the module docstring.
         regularization: (B,) ``delta`` added to F's diagonal (``F + delta I``), 0 if none.
-        matrix_class: (B,) :class:`~drake_abs.matrix_class.MatrixClass` codes, or -1 when the
+        matrix_class: (B,) :class:`~drake_abs.lcp.matrix_class.MatrixClass` codes, or -1 when the
             check was skipped (``on_bad_matrix="attempt"``).
         dlam_dq: (B, d, d) implicit Jacobian, or None unless ``jacobians=True``.
         dlam_dmu: derivative with respect to mu in the form it was given: (B, d) for a scalar or

@@ -44,13 +44,13 @@ from typing import Literal, Protocol
 import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
-from drake_abs.qp_mpc import QpMpc
+from drake_abs.mpc.qp_mpc import QpMpc
 
 GradientSource = Literal["model", "exact"]
 
 
 class PlantStep(Protocol):
-    """What a plant's step returns (e.g. :class:`drake_abs.quadcopter.QuadcopterStep`)."""
+    """What a plant's step returns (e.g. :class:`drake_abs.tasks.quadcopter.QuadcopterStep`)."""
 
     x_next: np.ndarray
     dx_dx: np.ndarray | None
@@ -143,7 +143,7 @@ class ClosedLoopResult:
         x: (T + 1, nx) states; u: (T, nu) applied inputs.
         tracking_cost: C(theta); violation: dist_1(x, X^{T+1}); penalty: w * violation;
             total: C + penalty.
-        status: (T,) :class:`drake_abs.qp_mpc.MpcStatus` codes of the MPC solves; fallback:
+        status: (T,) :class:`drake_abs.mpc.qp_mpc.MpcStatus` codes of the MPC solves; fallback:
             (T,) whether the fallback control was applied at that step.
         gradient: (n_theta,) d total / d theta (eq. 8), or None.
         gradient_source: "model", "exact" or None.

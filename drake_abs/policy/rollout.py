@@ -25,8 +25,8 @@ from typing import Protocol
 import numpy as np
 
 from drake_abs._validation import as_finite_array
-from drake_abs.lcs import LCS, GradientMode
-from drake_abs.smoothing import SmoothingPolicy
+from drake_abs.contact.lcs import LCS, GradientMode
+from drake_abs.contact.smoothing import SmoothingPolicy
 
 
 class Stepper(Protocol):
@@ -89,12 +89,12 @@ def rollout_policy(
 
     Args:
         stepper: the batched dynamics (see :class:`Stepper`).
-        policy: a policy of :mod:`drake_abs.policies` (act, vjp).
+        policy: a policy of :mod:`drake_abs.policy.policies` (act, vjp).
         theta: (P,) policy parameters.
         x0: (nx,) shared or (M, nx) initial states.
         noise: (M, H, nu) standard-normal exploration samples xi (the caller seeds them); the
             applied input is ``pi(x_t) + sigma xi_t``.
-        reward: a reward of :mod:`drake_abs.rewards` (stage, terminal).
+        reward: a reward of :mod:`drake_abs.policy.rewards` (stage, terminal).
         sigma: exploration scale (units of u); 0 for the deterministic policy.
         gradient: run the reverse pass.
     """

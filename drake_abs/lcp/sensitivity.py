@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from drake_abs.ipm_kernel import _invert
+from drake_abs.lcp.ipm_kernel import _invert
 
 
 def batched_inverse(M: np.ndarray) -> np.ndarray:

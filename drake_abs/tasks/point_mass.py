@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_abs.lcs import LCS
+from drake_abs.contact.lcs import LCS
 
 
 def point_mass_lcs(

@@ -1,4 +1,4 @@
-"""The interior-point iterations of :mod:`drake_abs.ipm`, compiled (numba), one problem at a
+"""The interior-point iterations of :mod:`drake_abs.lcp.ipm`, compiled (numba), one problem at a
 time over a batch: the algorithm and safeguards of the ``ipm`` module docstring, on the scaled
 problem. It is the only implementation of the iterations; :func:`drake_abs.solve_lcp` validates,
 scales and calls it, and computes the implicit Jacobians afterwards.
@@ -388,7 +388,7 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
 
 @nb.njit(cache=True)
 def prepare(F, shared, Q, mu_full, exact_tol, tol):
-    """Scale a batch (step 1 of the :mod:`drake_abs.ipm` docstring) and build the default start.
+    """Scale a batch (step 1 of the :mod:`drake_abs.lcp.ipm` docstring) and build the default start.
 
     ``F`` is (1, d, d) when ``shared`` else (B, d, d); ``Q`` and ``mu_full`` are (B, d) in
     original units. Returns ``(D, Fs, qs, c, mu_s, gap_scale, lam, s)``: the Jacobi scale D

@@ -6,7 +6,7 @@ From transitions (x_t, u_t, x_{t+1}) we fit, in deviations from a reference (x_r
 
 by ordinary least squares over all transitions (``numpy.linalg.lstsq``), one regression for all
 nx output rows at once. Without the intercept the reference is an equilibrium of the model,
-which is what :class:`drake_abs.qp_mpc.MpcSpec` assumes.
+which is what :class:`drake_abs.mpc.qp_mpc.MpcSpec` assumes.
 """
 
 from __future__ import annotations

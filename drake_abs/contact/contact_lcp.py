@@ -49,9 +49,9 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
-from drake_abs.ipm import LCPResult, check_solver_options, solve_lcp_trusted
-from drake_abs.lcs import GradientMode, check_gradient_mode
-from drake_abs.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.lcs import GradientMode, check_gradient_mode
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.lcp.ipm import LCPResult, check_solver_options, solve_lcp_trusted
 
 #: Solver defaults for contact steps. Sticking makes the linearised-cone LCP degenerate
 #: (beta_j = xi_j = 0) and its friction split non-unique (opposing directions can carry equal,

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from drake_abs.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
 
 _SMOOTHING = {
     "exact": Exact,
@@ -39,6 +39,15 @@ _SMOOTHING = {
     "contact_aware": ContactAware,
     "gaussian_matched": GaussianMatched,
 }
+
+
+#: The folder of the scenes shipped with the package.
+SCENES_DIR = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def shipped_scenes() -> list[str]:
+    """The names of the scenes shipped with the package (``Scene.load(name)``)."""
+    return sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
 
 
 #: The rigid-body dynamics providers a scene can name (see ``Scene.dynamics``).
@@ -49,7 +58,7 @@ DYNAMICS = ("auto", "pinocchio", "drake")
 class ModelSpec:
     """One model file. ``weld``: a frame of the model welded to the world at the origin (a fixed
     base); otherwise its root body floats: q = (x, y, z, yaw, pitch, roll), v their rates (a
-    chain of joints: ``drake_abs.diagrams.scene_builder.add_floating_base_chains``).
+    chain of joints: ``drake_abs.multibody.builder.add_floating_base_chains``).
     ``actuate``: joints to give an actuator (for URDFs without ``<transmission>`` tags)."""
 
     file: str
@@ -173,6 +182,22 @@ class Scene:
             if key in data:
                 data[key] = float(data[key])
         return cls(models=models, contacts=contacts, **data)
+
+    @classmethod
+    def load(cls, name: str | Path) -> Scene:
+        """A shipped scene by name (e.g. ``"box_push"``, see :func:`shipped_scenes`) or a scene
+        YAML file by path."""
+        path = Path(name)
+        if path.suffix in (".yaml", ".yml"):
+            if not path.is_file():
+                raise FileNotFoundError(f"scene file {str(name)!r} not found")
+            return cls.from_yaml(path)
+        shipped = SCENES_DIR / f"{name}.yaml"
+        if not shipped.is_file():
+            raise ValueError(
+                f"no shipped scene {str(name)!r}: give a YAML path or one of {shipped_scenes()}"
+            )
+        return cls.from_yaml(shipped)
 
     @classmethod
     def from_yaml(cls, source: str | Path) -> Scene:

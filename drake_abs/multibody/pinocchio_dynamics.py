@@ -1,15 +1,16 @@
 """A Drake MultibodyPlant's rigid-body dynamics evaluated by pinocchio, with analytic derivatives:
-the fast provider of :class:`~drake_abs.contact_lcp.StepQuantities` for the complementarity step.
+the fast provider of :class:`~drake_abs.contact.contact_lcp.StepQuantities` for the complementarity
+step.
 
 :func:`pinocchio_model_from_plant` copies a finalized MultibodyPlant (masses, inertias, joint
 frames, gravity) into a ``pinocchio.Model`` with the same generalized coordinates: every Drake
 joint with degrees of freedom must be a RevoluteJoint or a PrismaticJoint (welds are merged into
 their parent). Then ``qdot = v`` (N = I) and pinocchio's derivatives with respect to q are the
 ones the step needs. Scenes with a free root body get a floating base made of such joints (see
-:func:`drake_abs.diagrams.scene_builder.add_floating_base_chains`).
+:func:`drake_abs.multibody.builder.add_floating_base_chains`).
 
 :class:`PinocchioContactModel` has the interface of
-:class:`~drake_abs.systems.multibody_quantities.MultibodyContactModel` and gives the same numbers
+:class:`~drake_abs.multibody.drake_dynamics.MultibodyContactModel` and gives the same numbers
 (a test checks every quantity and derivative against it), in a fraction of the time:
 
 - values: ``computeMinverse`` (W), ``aba`` (v_free = v + h aba(q, v, B u), gravity and bias
@@ -28,7 +29,7 @@ import pinocchio as pin
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import PrismaticJoint, RevoluteJoint, WeldJoint
 
-from drake_abs.systems.multibody_quantities import ContactModelBase
+from drake_abs.multibody.drake_dynamics import ContactModelBase
 
 
 def _se3(X) -> pin.SE3:
@@ -116,7 +117,7 @@ def pinocchio_model_from_plant(plant: MultibodyPlant) -> tuple[pin.Model, dict]:
 class PinocchioContactModel(ContactModelBase):
     """Step quantities of a MultibodyPlant (revolute and prismatic joints) with point contacts
     against one ground plane, evaluated by pinocchio. Arguments as
-    :class:`~drake_abs.systems.multibody_quantities.MultibodyContactModel`."""
+    :class:`~drake_abs.multibody.drake_dynamics.MultibodyContactModel`."""
 
     def _setup(self) -> None:
         plant = self.plant

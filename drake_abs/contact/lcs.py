@@ -15,7 +15,8 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
-from drake_abs.ipm import (
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.lcp.ipm import (
     SOLVER_DEFAULTS,
     LCPResult,
     OnBadMatrix,
@@ -23,7 +24,6 @@ from drake_abs.ipm import (
     check_solver_options,
     solve_lcp_trusted,
 )
-from drake_abs.smoothing import Exact, SmoothingPolicy
 
 GradientMode = Literal["frozen", "total"]
 
@@ -69,7 +69,7 @@ class LCS:
 
     Matrices: A (dx, dx), B (dx, du), C (dx, d), c (dx,), D (d, dx), E (d, du), F (d, d),
     d (d,). F is checked once at construction (positive semidefinite or P-matrix, see
-    :mod:`drake_abs.matrix_class`) according to ``on_bad_matrix``.
+    :mod:`drake_abs.lcp.matrix_class`) according to ``on_bad_matrix``.
     """
 
     A: np.ndarray

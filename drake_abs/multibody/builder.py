@@ -1,4 +1,10 @@
-"""Build a scene's MultibodyPlant and contact model from a :class:`drake_abs.scene.Scene`."""
+"""Build a scene's MultibodyPlant, its contact model and its stepper from a
+:class:`drake_abs.multibody.scene.Scene`.
+
+``make_stepper(scene)`` (or ``build_scene_model(scene).stepper()``) is the one way to get a
+scene's batched step with every setting the scene names applied (smoothing policy, activation
+distance); arguments override a setting explicitly, nothing is copied by hand.
+"""
 
 from __future__ import annotations
 
@@ -16,15 +22,18 @@ from pydrake.multibody.tree import (
     SpatialInertia,
 )
 
-from drake_abs.diagrams.model_files import add_models_without_collisions
-from drake_abs.scene import ModelSpec, Scene
-from drake_abs.systems.multibody_quantities import (
+from drake_abs.contact.lcs import GradientMode
+from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.multibody.drake_dynamics import (
     ContactModelBase,
     GroundPlane,
     MultibodyContactModel,
     PointContact,
 )
-from drake_abs.systems.pinocchio_dynamics import PinocchioContactModel
+from drake_abs.multibody.model_files import add_models_without_collisions
+from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
+from drake_abs.multibody.scene import ModelSpec, Scene
+from drake_abs.multibody.stepper import ComplementarityStepper
 
 PACKAGE_DIR = Path(__import__("drake_abs").__file__).resolve().parent
 
@@ -74,6 +83,35 @@ class SceneModel:
     q0: np.ndarray
     v0: np.ndarray
 
+    @property
+    def x0(self) -> np.ndarray:
+        """The scene's initial state x = (q0, v0), shape (nq + nv,)."""
+        return np.concatenate([self.q0, self.v0])
+
+    def stepper(
+        self,
+        *,
+        smoothing: SmoothingPolicy | None = None,
+        activation_distance: float | None = None,
+        gradient: GradientMode = "frozen",
+        **solver_options,
+    ) -> ComplementarityStepper:
+        """The scene's batched step, with the scene's smoothing policy and activation distance.
+
+        Args:
+            smoothing: replaces the scene's smoothing policy (larger mu: more smoothing).
+            activation_distance: replaces the scene's activation distance (m).
+            gradient: ``"frozen"`` or ``"total"`` (see :class:`ComplementarityStepper`).
+            solver_options: passed to the interior-point solver.
+        """
+        return ComplementarityStepper(
+            self.contact_model,
+            self.scene.smoothing_policy() if smoothing is None else smoothing,
+            gradient,
+            self.scene.activation_distance if activation_distance is None else activation_distance,
+            **solver_options,
+        )
+
 
 def _parse(parser: Parser, path: Path, collisions: bool):
     if collisions:
@@ -87,7 +125,7 @@ def add_scene_models(
     """Parse the scene's models into ``plant`` (not finalized), with welds, actuators and
     floating bases (:func:`add_floating_base_chains`); ``collisions=False`` leaves the files'
     collision geometry out (and draws STL visuals through OBJ copies; see
-    :mod:`drake_abs.diagrams.model_files`)."""
+    :mod:`drake_abs.multibody.model_files`)."""
     parser = parser or Parser(plant)
     if any(m.file.startswith("example-robot-data:") for m in scene.models):
         parser.package_map().Add("example-robot-data", str(example_robot_data_dir()))
@@ -152,8 +190,18 @@ def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
     return [b.name() for b in roots]
 
 
-def build_scene_model(scene: Scene) -> SceneModel:
-    """The dynamics plant and contact model of ``scene``."""
+def make_stepper(scene: Scene | str | Path, **overrides) -> ComplementarityStepper:
+    """The batched step of ``scene`` (a :class:`Scene`, a shipped scene's name such as
+    ``"box_push"``, or a YAML path) with every scene setting applied; keyword arguments override
+    a setting explicitly (see :meth:`SceneModel.stepper`)."""
+    return build_scene_model(scene).stepper(**overrides)
+
+
+def build_scene_model(scene: Scene | str | Path) -> SceneModel:
+    """The dynamics plant, contact model and initial state of ``scene`` (a :class:`Scene`, a
+    shipped scene's name, or a YAML path)."""
+    if not isinstance(scene, Scene):
+        scene = Scene.load(scene)
     plant = MultibodyPlant(0.0)
     add_scene_models(plant, scene)
     plant.Finalize()

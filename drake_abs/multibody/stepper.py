@@ -1,0 +1,202 @@
+"""The batched complementarity step of a multibody scene: one step ``x+ = f(x, u)`` of a plant
+with point contacts, for a batch of states, with its Jacobians (docs/math.md section 6).
+
+:class:`ComplementarityStepper` is the one implementation of this step: the Drake system
+:class:`drake_abs.systems.ComplementarityPlant` and the batched rollouts call it. It leaves out
+contacts farther than the activation distance, so a step's cost follows the contacts in play, not
+the size of the model. Build one from a scene with :func:`drake_abs.multibody.make_stepper`, which
+applies every setting the scene names.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_abs.contact.contact_lcp import contact_step
+from drake_abs.contact.lcs import GradientMode, check_gradient_mode
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.multibody.drake_dynamics import ContactModelBase
+
+
+class StepOverflowWarning(UserWarning):
+    """A step from a finite state gave a non-finite next state or Jacobian (e.g. explicit
+    Coriolis terms at very large joint velocities); its ``converged`` flag is False."""
+
+
+@dataclass(frozen=True)
+class RigidStepResult:
+    """One batched step of a complementarity plant (B states, nc contact candidates).
+
+    Attributes:
+        x_next: (B, nq + nv).
+        normal_impulse: (B, nc) normal impulse of every candidate (N s; 0 when left out).
+        friction_impulse: (B, nc, 3) tangential impulse in the world frame (N s).
+        mu: (B, nc) central-path value reached per contact (0 when left out).
+        active: (B, nc) which candidates were in the step's LCP.
+        converged: (B,) solver flags.
+        iterations: (B,) interior-point iterations (0 without an LCP).
+        dx_dx, dx_du: (B, nx, nx), (B, nx, nu); dn_dx, dn_du: (B, nc, nx), (B, nc, nu) for the
+            normal impulses (None unless Jacobians were asked for).
+    """
+
+    x_next: np.ndarray
+    normal_impulse: np.ndarray
+    friction_impulse: np.ndarray
+    mu: np.ndarray
+    active: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    dx_dx: np.ndarray | None = None
+    dx_du: np.ndarray | None = None
+    dn_dx: np.ndarray | None = None
+    dn_du: np.ndarray | None = None
+
+
+class ComplementarityStepper:
+    """Batched step ``x+ = f(x, u)`` with Jacobians, for one contact model.
+
+    Args:
+        model: the plant's contact model (quantities and derivatives).
+        smoothing: per-contact mu policy (default Exact); larger mu is smoother.
+        gradient: ``"frozen"`` or ``"total"`` (see
+            :func:`drake_abs.contact.contact_lcp.contact_step`).
+        activation_distance: candidates farther than this (m) are left out of the LCP.
+        solver_options: passed to the interior-point solver.
+    """
+
+    def __init__(
+        self,
+        model: ContactModelBase,
+        smoothing: SmoothingPolicy | None = None,
+        gradient: GradientMode = "frozen",
+        activation_distance: float = float("inf"),
+        **solver_options,
+    ):
+        check_gradient_mode(gradient)
+        self.model = model
+        self.smoothing = Exact() if smoothing is None else smoothing
+        self.gradient = gradient
+        self.activation_distance = float(activation_distance)
+        self.solver_options = solver_options
+
+    @property
+    def sizes(self) -> tuple[int, int, int, int]:
+        """``(nq, nv, nu, nc)``."""
+        m = self.model
+        return m.nq, m.nv, m.nu, len(m.contacts)
+
+    def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True) -> RigidStepResult:
+        """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared."""
+        nq, nv, nu, nc = self.sizes
+        x = np.asarray(x, dtype=float)
+        if x.ndim == 1:
+            x = x[None]
+        B = x.shape[0]
+        u = np.asarray(u, dtype=float)
+        if u.shape != (B, nu):
+            u = np.broadcast_to(u, (B, nu))
+        if x.ndim != 2 or x.shape[1] != nq + nv:
+            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
+        if not (np.isfinite(x).all() and np.isfinite(u).all()):
+            raise ValueError("x and u must be finite")
+        q, v = x[:, :nq], x[:, nq:]
+        pruned = np.isfinite(self.activation_distance)
+        groups = None  # (rows, active contact indices, quantities or None) per active set
+        if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
+            idx, quant = self.model.quantities_within(
+                q, v, u, self.activation_distance, derivatives=jacobians
+            )
+            active = np.zeros((1, nc), dtype=bool)
+            active[0, idx] = True
+            groups = [(slice(None), idx, quant)]
+        elif pruned:
+            active = self.model.distances(q) <= self.activation_distance
+        else:  # nothing to prune: skip the distance evaluation
+            active = np.ones((B, nc), dtype=bool)
+        out = {
+            "x_next": np.empty((B, nq + nv)),
+            "normal_impulse": np.zeros((B, nc)),
+            "friction_impulse": np.zeros((B, nc, 3)),
+            "mu": np.zeros((B, nc)),
+            "converged": np.ones(B, dtype=bool),
+            "iterations": np.zeros(B, dtype=np.int64),
+        }
+        if jacobians:
+            out.update(
+                dx_dx=np.empty((B, nq + nv, nq + nv)),
+                dx_du=np.empty((B, nq + nv, nu)),
+                dn_dx=np.zeros((B, nc, nq + nv)),
+                dn_du=np.zeros((B, nc, nu)),
+            )
+        if groups is None:
+            groups = _groups_by_active_set(active)
+        for rows, idx, quant in groups:
+            if quant is None:
+                quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
+            cone = self.model.cone_for(idx)
+            r = contact_step(
+                quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
+                **self.solver_options,
+            )  # fmt: skip
+            self._scatter(out, rows, idx, cone, r, jacobians)
+        finite = np.isfinite(out["x_next"]).all(axis=1)
+        if jacobians:
+            finite &= np.isfinite(out["dx_dx"]).all(axis=(1, 2))
+            finite &= np.isfinite(out["dx_du"]).all(axis=(1, 2))
+        if not finite.all():  # the dynamics overflowed (not the LCP): flag, never pass as valid
+            out["converged"] &= finite
+            warnings.warn(
+                f"{int((~finite).sum())} of {B} step(s) overflowed to a non-finite state or "
+                f"Jacobian (largest |x| in: {float(np.abs(x[~finite]).max()):.3g}); their "
+                "`converged` flags are False",
+                StepOverflowWarning,
+                stacklevel=2,
+            )
+        return RigidStepResult(active=active, **out)
+
+    def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
+        """Write one group's step into the batch outputs (rows: a slice or row indices)."""
+        nc_g, nt, _ = cone.sizes()
+        nq = r.q_next.shape[1]
+        out["x_next"][rows, :nq] = r.q_next
+        out["x_next"][rows, nq:] = r.v_next
+        out["converged"][rows] = r.converged
+        if jacobians:  # also without contact (free flight): the Jacobian is the free step's
+            out["dx_dx"][rows] = r.dx_dx
+            out["dx_du"][rows] = r.dx_du
+        if r.lcp is None:
+            return
+        out["iterations"][rows] = r.lcp.iterations
+        # rows x contacts blocks: index the rows first (a view for a slice, a copy otherwise)
+        whole = isinstance(rows, slice)
+        fr = idx[cone.frictional]
+        beta = r.lam[:, nc_g : nc_g + nt].reshape(r.lam.shape[0], -1, cone.directions)
+        blocks = [
+            ("normal_impulse", idx, r.lam[:, :nc_g]),
+            ("mu", idx, r.mu),
+            ("friction_impulse", fr, beta @ self.model.tangents),
+        ]
+        if jacobians:
+            blocks += [("dn_dx", idx, r.dlam_dx[:, :nc_g]), ("dn_du", idx, r.dlam_du[:, :nc_g])]
+        for key, cols, value in blocks:
+            if whole:
+                out[key][:, cols] = value
+            else:
+                out[key][np.ix_(rows, cols)] = value
+
+
+def _groups_by_active_set(active: np.ndarray) -> list[tuple]:
+    """``(rows, active contact indices, None)`` per distinct row of ``active`` (B, nc): states
+    with the same active set share one batched LCP (rows is a slice when all of them do)."""
+    if active.shape[0] == 0:
+        return []
+    if (active == active[0]).all():
+        return [(slice(None), np.flatnonzero(active[0]), None)]
+    masks, group = np.unique(active, axis=0, return_inverse=True)
+    return [
+        (np.flatnonzero(group.ravel() == g), np.flatnonzero(mask), None)
+        for g, mask in enumerate(masks)
+    ]
