@@ -132,3 +132,11 @@ def test_each_subpackage_says_what_it_is():
     for init in (ROOT / "drake_abs").glob("*/__init__.py"):
         doc = ast.get_docstring(ast.parse(init.read_text()))
         assert doc and len(doc) > 40, init
+
+
+def test_tests_mirror_the_layout():
+    """Each test folder is named for the layer it tests (project-wide tests stay at the top)."""
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and p.name[0] != "_"}
+    folders.discard("__pycache__")
+    layers = {name.rsplit("/", 1)[-1] for name in LAYERS} | {"experiments"}
+    assert folders <= layers, folders - layers
