@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective, first_order
 from drake_abs.policy.gradient_stats import measure_bias, measure_variance, reference_gradient
@@ -184,16 +185,16 @@ class Task:
 def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, seed: int) -> dict:
     """Adam on FOPG from ``task.theta0``; returns the log and theta at every iteration.
 
-    A run whose rollouts leave the finite numbers (the policy drove the state to inf or NaN, or
-    the estimate was not finite) stops there: ``diverged_at`` is that iteration (else None) and
-    ``thetas`` ends with the last finite-gradient theta."""
+    A run whose rollouts leave the finite numbers (the policy drove the state to inf or NaN, the
+    estimate was not finite, or no rollout of the batch converged) stops there: ``diverged_at``
+    is that iteration (else None) and ``thetas`` ends with the last finite-gradient theta."""
     obj = task.objective(smoothing, size.horizon)
     thetas, rows = [], []
 
     def estimator(theta, rng):
         thetas.append(theta.copy())
         est = first_order(obj, theta, rng, size.samples)
-        rows.append({"unconverged_steps": est.unconverged})
+        rows.append({"unconverged_steps": est.unconverged, "dropped_rollouts": est.dropped})
         return est
 
     try:
@@ -201,7 +202,7 @@ def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, see
             estimator, task.theta0, Adam(size.learning_rate), size.iterations, seed=seed,
             progress=False,
         )  # fmt: skip
-    except (ValueError, FloatingPointError) as err:
+    except (ValueError, FloatingPointError, UnconvergedStepError) as err:
         return {"thetas": thetas[:-1], "rows": rows, "diverged_at": len(thetas) - 1,
                 "error": str(err)}  # fmt: skip
     thetas.append(run.theta.copy())
@@ -254,11 +255,13 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
     for name, smoothing in DESIGNS.items():
         obj = task.objective(smoothing, size.horizon)
         returns, checkpoints, unconverged, seconds, diverged, errors = [], [], 0, 0.0, {}, {}
+        dropped = 0
         for seed in size.seeds:
             start = time.perf_counter()
             log = train_design(task, smoothing, size, seed)
             seconds += time.perf_counter() - start
             unconverged += sum(r["unconverged_steps"] for r in log["rows"])
+            dropped += sum(r["dropped_rollouts"] for r in log["rows"])
             if log["diverged_at"] is not None:
                 diverged[str(seed)] = log["diverged_at"]
                 errors[str(seed)] = log["error"]
@@ -275,7 +278,8 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
                     checkpoints.append(
                         _checkpoint(obj, exact, theta, size, seed, k, cp_seed, references)
                     )
-                except (ValueError, FloatingPointError) as err:  # non-finite rollouts: reported
+                except (ValueError, FloatingPointError, UnconvergedStepError) as err:
+                    # non-finite or unconverged rollouts: reported
                     checkpoints.append({"seed": seed, "iteration": k, "failed": str(err)})
         R = np.array(returns)
         alive = np.isfinite(R).sum(axis=0)
@@ -295,6 +299,7 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
             "checkpoints": checkpoints,
             "bias_by_iteration": _bias_by_iteration(checkpoints, size.checkpoints),
             "unconverged_training_steps": int(unconverged),
+            "dropped_training_rollouts": int(dropped),
             "training_seconds": seconds,
         }
     return {"size": asdict(size), "designs": designs}
@@ -340,6 +345,7 @@ def run(config: Config | None = None, out: str | Path = "results/bias-return") -
     with warnings.catch_warnings():
         # counted per step (unconverged_training_steps); the warnings themselves are noise here
         warnings.simplefilter("ignore", LCPConvergenceWarning)
+        warnings.simplefilter("ignore", UnconvergedStepWarning)  # counted as dropped_rollouts
         for name in ("hopping_ball", "half_cheetah"):
             size = getattr(config, name)
             if size is None:
@@ -419,7 +425,8 @@ def report(summary: dict) -> str:
                 f"it {it[half]} {_fmt(mean[half])} +- {_fmt(std[half])}, "
                 f"final {_fmt(mean[-1])} +- {_fmt(std[-1])} "
                 f"({d['seeds_evaluated'][-1]} of {len(d['returns_per_seed'])} seeds); "
-                f"unconverged steps {d['unconverged_training_steps']}"
+                f"unconverged steps {d['unconverged_training_steps']} "
+                f"(rollouts dropped {d['dropped_training_rollouts']})"
                 + (f"; DIVERGED (seed: iteration) {d['diverged_at']}" if d["diverged_at"] else "")
             )
             lines.append("      bias " + "; ".join(bias))

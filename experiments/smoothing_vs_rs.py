@@ -41,6 +41,7 @@ import numpy as np
 
 from drake_abs.contact.rollout import rollout
 from drake_abs.contact.smoothing import Fixed
+from drake_abs.contact.unconverged import UnconvergedStepWarning
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.tasks.box_lcs import TranslatingBox
 from drake_abs.tasks.point_mass import point_mass_lcs
@@ -182,7 +183,10 @@ def impact_experiment(config: Config, rng: np.random.Generator) -> dict:
 
 
 def push_gradients(config: Config, pushes: np.ndarray, contact=None) -> tuple:
-    """Final position of the box pushed by each force (B,) and its derivative; converged."""
+    """Final position of the box pushed by each force (B,) and its derivative; converged.
+
+    A push whose rollout took an unconverged step has a NaN derivative (the rollout's
+    ``on_unconverged="drop"``): its Jacobians are not the model's and are not reported."""
     box = TranslatingBox(friction=config.friction, time_step=config.time_step)
     x0 = np.tile(box.resting_state(), (pushes.size, 1))
     u = np.repeat(pushes[:, None, None], config.push_steps, axis=1)
@@ -208,11 +212,15 @@ def friction_experiment(config: Config, rng: np.random.Generator) -> dict:
         _, g, conv = push_gradients(config, us, Fixed(mu))
         seconds = time.perf_counter() - start
         out["unconverged"] += int((~conv).sum())
+        err = np.abs(g - g_gt)[conv]
         out["bs"][f"{mu:g}"] = {
-            "grad": g.tolist(),
+            "grad": [float(v) if c else None for v, c in zip(g, conv, strict=True)],
+            "converged_pushes": int(conv.sum()),
+            "pushes": int(n),
             "seconds_per_gradient": seconds / n,
             "steps_per_gradient": T,
-            "max_abs_error_vs_gt": float(np.abs(g - g_gt).max()),
+            # over the pushes whose rollout converged (None when none did)
+            "max_abs_error_vs_gt": float(err.max()) if err.size else None,
         }
     at = int(np.argmin(np.abs(us - u_c)))
     for N in config.push_samples:
@@ -264,6 +272,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted in "unconverged"
+        warnings.simplefilter("ignore", UnconvergedStepWarning)  # and "converged_pushes"
         impact = impact_experiment(config, rng)
         friction = friction_experiment(config, rng)
     summary = {
@@ -368,7 +377,8 @@ def _plot(out: Path, config: Config, impact: dict, friction: dict) -> None:
     u = np.array(friction["u"])
     ax.plot(u, friction["gt"], "k", lw=2, label="GT (exact)")
     for mu, b in friction["bs"].items():
-        ax.plot(u, b["grad"], label=f"BS mu={mu}")
+        g = np.array([np.nan if v is None else v for v in b["grad"]])  # gaps: unconverged
+        ax.plot(u, g, label=f"BS mu={mu} ({b['converged_pushes']}/{b['pushes']} converged)")
     for N, r in friction["rs"].items():
         mean, std = np.array(r["first_draw"]), np.array(r["std"])
         line = ax.plot(u, mean, ":", label=f"RS N={N} (one draw, +-std band)")[0]

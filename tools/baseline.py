@@ -99,6 +99,8 @@ def differences(old, new, rtol: float) -> list[str]:
     for key in sorted(set(a) | set(b)):
         if _is_timing(key):
             continue
+        if key not in a:  # a new output: reported by `added`, not a changed number
+            continue
         x, y = a.get(key, "missing"), b.get(key, "missing")
         if isinstance(x, float) and isinstance(y, float):
             same = (math.isnan(x) and math.isnan(y)) or x == y
@@ -157,7 +159,9 @@ def main() -> int:
             if ratios
             else ""
         )
-        print(f"{key}: {'same' if not bad else f'{len(bad)} differences'}{clock}")
+        added = sorted(set(dict(_leaves(value))) - set(dict(_leaves(old)))) if ratios else []
+        extra = f"; {len(added)} new entries (e.g. {added[0]})" if added else ""
+        print(f"{key}: {'same' if not bad else f'{len(bad)} differences'}{clock}{extra}")
         for line in bad[:20]:
             print("   ", line)
         failures += bool(bad)

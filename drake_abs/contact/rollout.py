@@ -15,6 +15,11 @@ import numpy as np
 from drake_abs._validation import as_finite_array
 from drake_abs.contact.lcs import LCS, GradientMode
 from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.unconverged import (
+    UnconvergedPolicy,
+    apply_unconverged_policy,
+    check_unconverged_policy,
+)
 
 
 @dataclass(frozen=True)
@@ -26,14 +31,18 @@ class Rollout:
         lam: (B, N, d) contact impulses of each step.
         mu: (B, N, d) central-path values reached.
         converged: (B, N) solver flags of each step.
-        dxN_dx0: (B, dx, dx) Jacobian of the final state w.r.t. the initial state.
-        dxN_du: (B, N, dx, du) Jacobian of the final state w.r.t. each step's input.
+        used: (B,) rollouts whose Jacobians may be used (all under ``on_unconverged="flag"``;
+            those whose every step converged under ``"drop"``).
+        dxN_dx0: (B, dx, dx) Jacobian of the final state w.r.t. the initial state (NaN for a
+            dropped rollout).
+        dxN_du: (B, N, dx, du) Jacobian of the final state w.r.t. each step's input (likewise).
     """
 
     x: np.ndarray
     lam: np.ndarray
     mu: np.ndarray
     converged: np.ndarray
+    used: np.ndarray
     dxN_dx0: np.ndarray | None
     dxN_du: np.ndarray | None
 
@@ -46,6 +55,7 @@ def rollout(
     *,
     gradient: GradientMode = "frozen",
     jacobians: bool = True,
+    on_unconverged: UnconvergedPolicy = "drop",
 ) -> Rollout:
     """Roll out ``x_{t+1} = lcs.step(x_t, u_t)`` for a batch.
 
@@ -55,7 +65,11 @@ def rollout(
         u: (N, du) inputs shared by the batch, or (B, N, du).
         smoothing, gradient: as in :meth:`LCS.step`.
         jacobians: accumulate dxN_dx0 and dxN_du.
+        on_unconverged: ``"drop"`` (default: a rollout with an unconverged step gets NaN
+            Jacobians and ``used`` False), ``"flag"`` or ``"raise"``
+            (:mod:`drake_abs.contact.unconverged`).
     """
+    check_unconverged_policy(on_unconverged)
     nx, nu, nc = lcs.dims
     x0 = as_finite_array(x0, "x0", ndim=(1, 2))
     X = np.atleast_2d(x0)
@@ -80,9 +94,12 @@ def rollout(
         if jacobians:
             Fx[:, t], Ju[:, t] = r.dx_dx, r.dx_du
     Jx = None
+    used = apply_unconverged_policy(conv, on_unconverged)
     if jacobians:  # one backward sweep: P = dx_N / dx_{t+1}, so dx_N / du_t = P dx_{t+1} / du_t
         Jx = np.broadcast_to(np.eye(nx), (nb, nx, nx)).copy()
         for t in range(n - 1, -1, -1):
             Ju[:, t] = Jx @ Ju[:, t]
             Jx = Jx @ Fx[:, t]
-    return Rollout(xs, lams, mus, conv, Jx, Ju)
+        Jx[~used] = np.nan  # never used silently
+        Ju[~used] = np.nan
+    return Rollout(xs, lams, mus, conv, used, Jx, Ju)

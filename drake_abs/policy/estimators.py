@@ -14,6 +14,11 @@
 
 Every estimator takes a :class:`PolicyObjective`, theta and a numpy Generator (all randomness
 comes from it: the same seed gives the same numbers) and returns a :class:`GradientEstimate`.
+
+Unconverged solver steps: the objective's ``on_unconverged`` policy (default ``"drop"``, see
+:func:`drake_abs.policy.rollout.rollout_policy`) decides; under ``"drop"`` every average runs
+over the rollouts whose steps all converged, and the estimate says how many were dropped. An
+estimate with no usable rollout raises :class:`~drake_abs.policy.rollout.UnconvergedStepError`.
 """
 
 from __future__ import annotations
@@ -22,7 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_abs.policy.rollout import PolicyRollout, Stepper, rollout_policy
+from drake_abs.policy.rollout import (
+    PolicyRollout,
+    Stepper,
+    UnconvergedPolicy,
+    UnconvergedStepError,
+    check_unconverged_policy,
+    rollout_policy,
+)
 
 
 @dataclass(frozen=True)
@@ -36,6 +48,8 @@ class PolicyObjective:
         x0: (nx,) initial state.
         horizon: H steps.
         sigma: exploration noise scale (units of u).
+        on_unconverged: ``"drop"`` (default), ``"flag"`` or ``"raise"``: what rollouts with an
+            unconverged solver step count for (:func:`~drake_abs.policy.rollout.rollout_policy`).
     """
 
     stepper: Stepper
@@ -44,8 +58,10 @@ class PolicyObjective:
     x0: np.ndarray
     horizon: int
     sigma: float = 0.1
+    on_unconverged: UnconvergedPolicy = "drop"
 
     def __post_init__(self):
+        check_unconverged_policy(self.on_unconverged)
         if int(self.horizon) < 1:
             raise ValueError(f"horizon must be >= 1; got {self.horizon!r}")
         if not (np.isfinite(self.sigma) and self.sigma >= 0):
@@ -57,7 +73,7 @@ class PolicyObjective:
     def rollout(self, theta, noise: np.ndarray, gradient: bool = True) -> PolicyRollout:
         return rollout_policy(
             self.stepper, self.policy, theta, self.x0, noise, self.reward,
-            sigma=self.sigma, gradient=gradient,
+            sigma=self.sigma, gradient=gradient, on_unconverged=self.on_unconverged,
         )  # fmt: skip
 
 
@@ -65,26 +81,36 @@ class PolicyObjective:
 class GradientEstimate:
     """One estimate: ``grad`` (P,) of the mean return, ``value`` (mean return of the rollouts
     it used), ``rollouts`` and ``steps`` (simulated), ``unconverged`` (steps whose solver did not
-    converge; their rollouts are still used and counted here)."""
+    converge), ``dropped`` (rollouts left out for them, under ``on_unconverged="drop"``)."""
 
     grad: np.ndarray
     value: float
     rollouts: int
     steps: int
     unconverged: int
+    dropped: int = 0
 
 
 def _summary(grad, returns, rollouts: list[PolicyRollout]) -> GradientEstimate:
     steps = sum(r.converged.size for r in rollouts)
     bad = sum(int((~r.converged).sum()) for r in rollouts)
     n = sum(r.converged.shape[0] for r in rollouts)
-    return GradientEstimate(np.asarray(grad), float(np.mean(returns)), n, steps, bad)
+    dropped = sum(r.dropped for r in rollouts)
+    return GradientEstimate(np.asarray(grad), float(np.mean(returns)), n, steps, bad, dropped)
+
+
+def _require(count: int, needed: int, what: str) -> None:
+    if count < needed:
+        raise UnconvergedStepError(
+            f"{what}: only {count} rollout(s) without unconverged steps, {needed} needed"
+        )
 
 
 def first_order(obj: PolicyObjective, theta, rng: np.random.Generator, M: int) -> GradientEstimate:
-    """FOPG (eq. 4.1) from M rollouts."""
+    """FOPG (eq. 4.1) from M rollouts (the mean over the rollouts used)."""
     r = obj.rollout(theta, obj.noise(rng, M))
-    return _summary(r.grad.mean(axis=0), r.returns, [r])
+    _require(int(r.used.sum()), 1, "first_order")
+    return _summary(r.grad[r.used].mean(axis=0), r.returns[r.used], [r])
 
 
 def _score(obj: PolicyObjective, theta, r: PolicyRollout, noise: np.ndarray) -> np.ndarray:
@@ -108,9 +134,11 @@ def zeroth_order(obj: PolicyObjective, theta, rng: np.random.Generator, M: int) 
         raise ValueError(f"M must be >= 2 for the leave-one-out baseline; got {M}")
     noise = obj.noise(rng, M)
     r = obj.rollout(theta, noise, gradient=False)
-    score = _score(obj, theta, r, noise)
-    adv = r.returns - _loo_baseline(r.returns)
-    return _summary((adv[:, None] * score).mean(axis=0), r.returns, [r])
+    _require(int(r.used.sum()), 2, "zeroth_order")
+    score = _score(obj, theta, r, noise)[r.used]
+    R = r.returns[r.used]
+    adv = R - _loo_baseline(R)
+    return _summary((adv[:, None] * score).mean(axis=0), R, [r])
 
 
 def alpha_order(
@@ -121,9 +149,11 @@ def alpha_order(
         raise ValueError(f"alpha must be in [0, 1]; got {alpha!r}")
     noise = obj.noise(rng, M)
     r = obj.rollout(theta, noise)
-    score = _score(obj, theta, r, noise)
-    g_zo = ((r.returns - _loo_baseline(r.returns))[:, None] * score).mean(axis=0)
-    return _summary(alpha * r.grad.mean(axis=0) + (1 - alpha) * g_zo, r.returns, [r])
+    _require(int(r.used.sum()), 2, "alpha_order")
+    score = _score(obj, theta, r, noise)[r.used]
+    R = r.returns[r.used]
+    g_zo = ((R - _loo_baseline(R))[:, None] * score).mean(axis=0)
+    return _summary(alpha * r.grad[r.used].mean(axis=0) + (1 - alpha) * g_zo, R, [r])
 
 
 def randomized_smoothing(
@@ -139,9 +169,11 @@ def randomized_smoothing(
     grads, returns, rolls = [], [], []
     for i in range(N):  # one parameter per rollout: N batched rollouts of one
         r = obj.rollout(theta + w[i], noise[i : i + 1])
-        grads.append(r.grad[0])
-        returns.append(r.returns[0])
         rolls.append(r)
+        if r.used[0]:
+            grads.append(r.grad[0])
+            returns.append(r.returns[0])
+    _require(len(grads), 1, "randomized_smoothing")
     return _summary(np.mean(grads, axis=0), np.array(returns), rolls)
 
 
@@ -164,12 +196,16 @@ def ars(
         raise ValueError(f"top must be in [1, directions = {directions}]; got {top}")
     d = rng.standard_normal((directions, theta.size))
     plus, minus, rolls = np.empty(directions), np.empty(directions), []
+    valid = np.ones(directions, dtype=bool)  # both sides free of unconverged rollouts
     for i in range(directions):
         noise = obj.noise(rng, M)
         rp = obj.rollout(theta + step * d[i], noise, gradient=False)
         rm = obj.rollout(theta - step * d[i], noise, gradient=False)
         plus[i], minus[i] = rp.returns.mean(), rm.returns.mean()
+        valid[i] = rp.used.all() and rm.used.all()
         rolls += [rp, rm]
+    _require(int(valid.sum()), top, "ars (directions)")
+    plus, minus, d = plus[valid], minus[valid], d[valid]
     best = np.argsort(-np.maximum(plus, minus))[:top]
     used = np.concatenate([plus[best], minus[best]])
     scale = used.std() if used.std() > 0 else 1.0

@@ -94,6 +94,7 @@ class VarianceStats:
         mean_value: mean over the batches of the estimates' mean return.
         rollouts_per_estimate: rollouts one estimate simulates.
         unconverged_steps: solver steps that did not converge, summed over all K batches.
+        dropped_rollouts: rollouts the estimates left out for those steps (``"drop"`` policy).
         steps: simulated steps, summed over all K batches.
         largest_batch_share: the largest single batch's share of ``sum_k ||g_k - mean||^2``.
             A heavy-tail diagnostic: about ``log(K) / K`` or less for Gaussian-like estimates,
@@ -115,6 +116,7 @@ class VarianceStats:
     unconverged_steps: int
     steps: int
     largest_batch_share: float
+    dropped_rollouts: int = 0
 
     def to_dict(self) -> dict:
         return {
@@ -130,6 +132,7 @@ class VarianceStats:
             "unconverged_steps": self.unconverged_steps,
             "steps": self.steps,
             "largest_batch_share": self.largest_batch_share,
+            "dropped_rollouts": self.dropped_rollouts,
         }
 
 
@@ -163,7 +166,7 @@ def measure_variance(estimator: Estimator, theta, *, batches: int, seed) -> Vari
     root = _seed_sequence(seed)
     rngs = [np.random.default_rng(_child(root, k)) for k in range(K)]
     grads, values, seconds = [], [], []
-    rollouts = unconverged = steps = 0
+    rollouts = unconverged = steps = dropped = 0
     for k, rng in enumerate(rngs):
         start = time.perf_counter()
         est = estimator(theta, rng)
@@ -175,6 +178,7 @@ def measure_variance(estimator: Estimator, theta, *, batches: int, seed) -> Vari
         values.append(est.value)
         rollouts = est.rollouts
         unconverged += est.unconverged
+        dropped += est.dropped
         steps += est.steps
     grads = np.array(grads)
     v, v_se = trace_variance(grads)
@@ -194,6 +198,7 @@ def measure_variance(estimator: Estimator, theta, *, batches: int, seed) -> Vari
         unconverged_steps=int(unconverged),
         steps=int(steps),
         largest_batch_share=share,
+        dropped_rollouts=int(dropped),
     )
 
 

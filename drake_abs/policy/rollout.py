@@ -27,6 +27,24 @@ import numpy as np
 from drake_abs._validation import as_finite_array
 from drake_abs.contact.lcs import LCS, GradientMode
 from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.unconverged import (
+    UnconvergedPolicy,
+    UnconvergedStepError,
+    UnconvergedStepWarning,
+    apply_unconverged_policy,
+    check_unconverged_policy,
+)
+
+__all__ = [
+    "LcsStepper",
+    "PolicyRollout",
+    "Stepper",
+    "UnconvergedPolicy",
+    "UnconvergedStepError",
+    "UnconvergedStepWarning",
+    "rollout_memory_bytes",
+    "rollout_policy",
+]
 
 
 class Stepper(Protocol):
@@ -57,16 +75,25 @@ class PolicyRollout:
         x: (M, H + 1, nx) states; u: (M, H, nu) inputs applied (policy plus noise).
         returns: (M,) sum of stage rewards plus the terminal reward, per rollout.
         converged: (M, H) the step solver's flags (a rollout with a False is not exact).
-        grad: (M, P) dJ_m / dtheta per rollout (None unless gradients were asked for).
-        grad_x0: (M, nx) dJ_m / dx_0 per rollout (None unless gradients were asked for).
+        used: (M,) the rollouts estimators may use: all of them under ``on_unconverged="flag"``,
+            those whose every step converged under ``"drop"``.
+        grad: (M, P) dJ_m / dtheta per rollout (None unless gradients were asked for; NaN for
+            a dropped rollout).
+        grad_x0: (M, nx) dJ_m / dx_0 per rollout (as ``grad``).
     """
 
     x: np.ndarray
     u: np.ndarray
     returns: np.ndarray
     converged: np.ndarray
+    used: np.ndarray
     grad: np.ndarray | None = None
     grad_x0: np.ndarray | None = None
+
+    @property
+    def dropped(self) -> int:
+        """Rollouts left out because a step did not converge."""
+        return int((~self.used).sum())
 
 
 def rollout_memory_bytes(M: int, H: int, nx: int, nu: int) -> int:
@@ -84,6 +111,7 @@ def rollout_policy(
     *,
     sigma: float = 1.0,
     gradient: bool = True,
+    on_unconverged: UnconvergedPolicy = "drop",
 ) -> PolicyRollout:
     """Roll out M noisy closed loops and (optionally) differentiate each return.
 
@@ -97,7 +125,11 @@ def rollout_policy(
         reward: a reward of :mod:`drake_abs.policy.rewards` (stage, terminal).
         sigma: exploration scale (units of u); 0 for the deterministic policy.
         gradient: run the reverse pass.
+        on_unconverged: what to do with a rollout that took an unconverged step: ``"drop"``
+            (default; marked unused, gradient NaN), ``"flag"`` or ``"raise"``
+            (:mod:`drake_abs.contact.unconverged` says why ``"drop"`` is the default).
     """
+    check_unconverged_policy(on_unconverged)
     theta = as_finite_array(theta, "theta", ndim=(1,))
     noise = as_finite_array(noise, "noise", ndim=(3,))
     M, H, nu = noise.shape
@@ -134,8 +166,9 @@ def rollout_policy(
             Fx[:, t], Fu[:, t], rx[:, t], ru[:, t] = step.dx_dx, step.dx_du, dr_dx, dr_du
     rT, drT = reward.terminal(xs[:, H])
     returns += rT
+    used = apply_unconverged_policy(conv, on_unconverged)
     if not gradient:
-        return PolicyRollout(xs, us, returns, conv)
+        return PolicyRollout(xs, us, returns, conv, used)
     g_x = drT
     g_theta = np.zeros((M, theta.size))
     for t in range(H - 1, -1, -1):
@@ -143,4 +176,6 @@ def rollout_policy(
         gx_pi, gth_pi = policy.vjp(theta, xs[:, t], g_u)
         g_theta += gth_pi
         g_x = rx[:, t] + np.einsum("mi,mij->mj", g_x, Fx[:, t]) + gx_pi
-    return PolicyRollout(xs, us, returns, conv, g_theta, g_x)
+    g_theta[~used] = np.nan  # never averaged in silently
+    g_x[~used] = np.nan
+    return PolicyRollout(xs, us, returns, conv, used, g_theta, g_x)

@@ -57,7 +57,7 @@ class Adam:
 class TrainingRun:
     """The parameters after training and the per-iteration log (``rows``: iteration, the batch's
     mean return, the evaluated return if an evaluation was given, the gradient norm, rollouts,
-    unconverged steps, seconds)."""
+    unconverged steps, rollouts dropped for them, seconds)."""
 
     theta: np.ndarray
     rows: list[dict]
@@ -108,6 +108,7 @@ def train(
             "grad_norm": float(np.linalg.norm(est.grad)),
             "rollouts": est.rollouts,
             "unconverged_steps": est.unconverged,
+            "dropped_rollouts": est.dropped,
         }
         if not np.all(np.isfinite(est.grad)):
             raise FloatingPointError(f"{name}: non-finite gradient estimate at iteration {k}")

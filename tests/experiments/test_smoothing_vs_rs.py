@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from drake_abs.contact.smoothing import Fixed
+from drake_abs.contact.unconverged import UnconvergedStepWarning
 from drake_abs.experiments import smoothing_vs_rs as srs
 
 CONFIG = srs.Config.test_size()
@@ -91,10 +92,17 @@ def test_pushed_box_gradients_exact_rs_and_bs():
         stds.append(gs.reshape(40, N).mean(axis=1).std())
     assert stds[0] / stds[1] == pytest.approx(4.0, rel=0.4)  # sqrt(64 / 4)
     ug = u_c + np.linspace(-1.0, 1.0, 21)
-    _, g_bs, _ = srs.push_gradients(CONFIG, ug, Fixed(1e-6))
-    _, g_bs2, _ = srs.push_gradients(CONFIG, ug, Fixed(1e-6))
+    _, g_bs, conv = srs.push_gradients(CONFIG, ug, Fixed(1e-5))
+    _, g_bs2, _ = srs.push_gradients(CONFIG, ug, Fixed(1e-5))
     np.testing.assert_array_equal(g_bs, g_bs2)
+    assert conv.all()
     assert np.all(np.diff(g_bs) > 0) and 0.2 * slope < g_bs[10] < 0.8 * slope
+    # At mu = 1e-6 some pushes' frictional steps do not converge (a known solver weakness on
+    # this non-monotone LCP): their derivatives are NaN, never reported as values.
+    with pytest.warns(UnconvergedStepWarning):
+        _, g6, conv6 = srs.push_gradients(CONFIG, ug, Fixed(1e-6))
+    assert not conv6.all() and np.isnan(g6[~conv6]).all() and np.isfinite(g6[conv6]).all()
+    assert np.all(np.diff(g6[conv6]) > 0)
 
 
 def test_experiment_writes_its_results(tmp_path):

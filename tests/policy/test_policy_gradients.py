@@ -207,3 +207,86 @@ def test_training_improves_the_return_and_logs_every_iteration(tmp_path):
     sgd = train(lambda th, rng: first_order(obj, th, rng, 16), theta0, SGD(lr=1e-3), 5,
                 seed=3, progress=False)  # fmt: skip
     assert np.all(np.isfinite(sgd.theta)) and not np.array_equal(sgd.theta, theta0)
+
+
+class _Corrupting:
+    """Wraps a stepper: rollouts in ``bad`` report unconverged steps from step ``t_bad`` on and
+    return wrong (scaled) Jacobians there, as a solve stopped early does."""
+
+    def __init__(self, inner, bad, t_bad=3):
+        self.inner, self.bad, self.t_bad, self.t = inner, np.asarray(bad), t_bad, 0
+
+    def step(self, x, u, *, jacobians=True):
+        from dataclasses import replace
+
+        r = self.inner.step(x, u, jacobians=jacobians)
+        if self.t >= self.t_bad:
+            conv = r.converged.copy()
+            conv[self.bad] = False
+            r = replace(r, converged=conv)
+            if jacobians:
+                dx = r.dx_dx.copy()
+                dx[self.bad] *= 1.4
+                r = replace(r, dx_dx=dx)
+        self.t += 1
+        return r
+
+
+def _objective(stepper, on_unconverged):
+    _, reward, x0, horizon = ball_task(Fixed(1e-3), "total", horizon=12)
+    return PolicyObjective(stepper, LinearPolicy(NX, NU), reward, x0, horizon, 0.3, on_unconverged)
+
+
+def test_unconverged_rollouts_are_dropped_by_default_flagged_or_raised(rng):
+    from drake_abs.policy.rollout import UnconvergedStepError, UnconvergedStepWarning
+
+    inner = ball_task(Fixed(1e-3), "total", horizon=12)[0]
+    theta = 0.1 * rng.standard_normal(LinearPolicy(NX, NU).n_params)
+    M, bad = 8, [1, 5]
+    clean = first_order(_objective(inner, "drop"), theta, np.random.default_rng(3), M)
+    assert clean.dropped == 0 and clean.unconverged == 0
+    # the per-rollout gradients of the clean run, to average over the kept ones by hand
+    obj = _objective(inner, "drop")
+    per = obj.rollout(theta, obj.noise(np.random.default_rng(3), M))
+    keep = np.setdiff1d(np.arange(M), bad)
+
+    assert PolicyObjective.__dataclass_fields__["on_unconverged"].default == "drop"
+    with pytest.warns(UnconvergedStepWarning, match="2 of 8 rollouts"):
+        dropped = first_order(_objective(_Corrupting(inner, bad), "drop"), theta,
+                              np.random.default_rng(3), M)  # fmt: skip
+    assert dropped.dropped == 2 and dropped.unconverged == 2 * 9 and dropped.rollouts == M
+    np.testing.assert_allclose(dropped.grad, per.grad[keep].mean(axis=0), rtol=1e-12)
+    assert dropped.value == pytest.approx(per.returns[keep].mean(), rel=1e-12)
+
+    with pytest.warns(UnconvergedStepWarning, match="kept"):
+        flagged = first_order(_objective(_Corrupting(inner, bad), "flag"), theta,
+                              np.random.default_rng(3), M)  # fmt: skip
+    assert flagged.dropped == 0 and flagged.unconverged == 18
+    assert not np.allclose(flagged.grad, clean.grad)  # the wrong Jacobians were used, visibly
+
+    with pytest.raises(UnconvergedStepError, match="2 of 8"):
+        first_order(_objective(_Corrupting(inner, bad), "raise"), theta,
+                    np.random.default_rng(3), M)  # fmt: skip
+    with pytest.raises(ValueError, match="on_unconverged"):
+        _objective(inner, "ignore")
+
+
+def test_dropped_rollouts_carry_nan_gradients_and_every_estimator_honours_the_mask(rng):
+    from drake_abs.policy.rollout import UnconvergedStepError, UnconvergedStepWarning
+
+    inner = ball_task(Fixed(1e-3), "total", horizon=12)[0]
+    theta = 0.1 * rng.standard_normal(LinearPolicy(NX, NU).n_params)
+    obj = _objective(_Corrupting(inner, [0]), "drop")
+    with pytest.warns(UnconvergedStepWarning):
+        r = obj.rollout(theta, obj.noise(np.random.default_rng(0), 4))
+    assert r.dropped == 1 and not r.used[0] and r.used[1:].all()
+    assert np.isnan(r.grad[0]).all() and np.isfinite(r.grad[1:]).all()
+    with pytest.warns(UnconvergedStepWarning):
+        for est in (
+            zeroth_order(_objective(_Corrupting(inner, [0]), "drop"), theta, rng, 4),
+            alpha_order(_objective(_Corrupting(inner, [0]), "drop"), theta, rng, 4, 0.5),
+        ):
+            assert est.dropped == 1 and np.isfinite(est.grad).all()
+    every = _Corrupting(inner, np.arange(4))
+    with pytest.warns(UnconvergedStepWarning), pytest.raises(UnconvergedStepError, match="only 0"):
+        first_order(_objective(every, "drop"), theta, rng, 4)
