@@ -43,3 +43,16 @@ def chain(value: np.ndarray, d_dx: np.ndarray, d_du: np.ndarray, gx, gu) -> np.n
     """An AutoDiffXd vector with ``value`` and the chain rule ``d_dx gx + d_du gu``: a step's
     Jacobians (computed in double) applied to the derivatives its inputs x, u carried in."""
     return join(value, d_dx @ gx + d_du @ gu)
+
+
+def guarded_jacobians(converged, on_unconverged: str, *jacobians: np.ndarray) -> list[np.ndarray]:
+    """A step's Jacobians as the ``on_unconverged`` policy allows (see
+    :mod:`drake_abs.contact.unconverged`): unchanged when every solve ``converged``; NaN under
+    ``"drop"`` (the derivatives a Drake system passes on are then visibly unusable), unchanged
+    under ``"flag"`` (both warn), an exception under ``"raise"``."""
+    from drake_abs.contact.unconverged import apply_unconverged_policy
+
+    used = apply_unconverged_policy(np.atleast_1d(converged).reshape(1, -1), on_unconverged)
+    if used[0]:
+        return list(jacobians)
+    return [np.full_like(J, np.nan) for J in jacobians]

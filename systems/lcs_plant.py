@@ -14,6 +14,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_abs.contact.lcs import LCS, GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.unconverged import UnconvergedPolicy, check_unconverged_policy
 from drake_abs.systems import autodiff
 
 
@@ -31,16 +32,22 @@ def LcsPlant_(T):
             - state
             - lam
             - mu
+            - converged
 
         Discrete state: ``x`` (dx), and the impulses ``lam`` (d) and central-path values ``mu``
-        (d) of the most recent step (zero before the first). Under AutoDiffXd, ``lam`` and ``mu``
-        carry derivatives too (``mu``'s are zero in the frozen gradient mode).
+        (d) of the most recent step (zero before the first), and whether its solve converged
+        (``converged``: 1.0 or 0.0; 1.0 before the first step). Under AutoDiffXd, ``lam`` and
+        ``mu`` carry derivatives too (``mu``'s are zero in the frozen gradient mode); the
+        derivatives of an unconverged step follow ``on_unconverged``.
 
         Args:
             lcs: the system; its matrices already include the time step.
             time_step: update period in seconds (the h the LCS was built with).
             smoothing: per-contact mu policy (default Exact); larger mu is smoother.
             gradient: ``"frozen"`` (paper 000 Algorithm 1) or ``"total"``.
+            on_unconverged: under AutoDiffXd, the derivatives of a step whose solve did not
+                converge: ``"drop"`` (default: NaN, with a warning), ``"flag"`` (kept, with a
+                warning) or ``"raise"`` (:mod:`drake_abs.contact.unconverged`).
         """
 
         def _construct(
@@ -49,9 +56,12 @@ def LcsPlant_(T):
             time_step: float,
             smoothing: SmoothingPolicy | None = None,
             gradient: GradientMode = "frozen",
+            on_unconverged: UnconvergedPolicy = "drop",
             converter=None,
         ):
             LeafSystem_[T].__init__(self, converter)
+            check_unconverged_policy(on_unconverged)
+            self.on_unconverged = on_unconverged
             if not (np.isfinite(time_step) and time_step > 0):
                 raise ValueError(f"time_step must be a finite number > 0; got {time_step!r}")
             check_gradient_mode(gradient)
@@ -63,10 +73,12 @@ def LcsPlant_(T):
             self._x = self.DeclareDiscreteState(nx)
             self._lam = self.DeclareDiscreteState(nc)
             self._mu = self.DeclareDiscreteState(nc)
+            self._ok = self.DeclareDiscreteState(np.ones(1))
             self.u_port = self.DeclareVectorInputPort("u", nu)
             self.state_port = self.DeclareStateOutputPort("state", self._x)
             self.lam_port = self.DeclareStateOutputPort("lam", self._lam)
             self.mu_port = self.DeclareStateOutputPort("mu", self._mu)
+            self.converged_port = self.DeclareStateOutputPort("converged", self._ok)
             self.DeclarePeriodicDiscreteUpdateEvent(self.time_step, 0.0, self._Update)
 
         def _construct_copy(self, other, converter=None):
@@ -76,6 +88,7 @@ def LcsPlant_(T):
                 other.time_step,
                 other.smoothing,
                 other.gradient,
+                other.on_unconverged,
                 converter=converter,
             )
 
@@ -94,15 +107,21 @@ def LcsPlant_(T):
             if autodiff.is_autodiff(x) or autodiff.is_autodiff(u):
                 (xv, uv), (gx, gu) = autodiff.split([x, u])
                 r = step(xv, uv, self.smoothing, gradient=self.gradient, jacobians=True)
-                x_next = autodiff.chain(r.x_next, r.dx_dx, r.dx_du, gx, gu)
-                lam = autodiff.chain(r.lam, r.dlam_dx, r.dlam_du, gx, gu)
-                mu = autodiff.chain(r.mu, r.dmu_dx, r.dmu_du, gx, gu)
+                J = autodiff.guarded_jacobians(
+                    r.converged, self.on_unconverged,
+                    r.dx_dx, r.dx_du, r.dlam_dx, r.dlam_du, r.dmu_dx, r.dmu_du,
+                )  # fmt: skip
+                x_next = autodiff.chain(r.x_next, J[0], J[1], gx, gu)
+                lam = autodiff.chain(r.lam, J[2], J[3], gx, gu)
+                mu = autodiff.chain(r.mu, J[4], J[5], gx, gu)
             else:
                 r = step(x, u, self.smoothing, gradient=self.gradient, jacobians=False)
                 x_next, lam, mu = r.x_next, r.lam, r.mu
             discrete_state.set_value(self._x, x_next)
             discrete_state.set_value(self._lam, lam)
             discrete_state.set_value(self._mu, mu)
+            ok = float(np.all(r.converged))
+            discrete_state.set_value(self._ok, np.array([T(ok)]))
 
     return Impl
 

@@ -125,3 +125,40 @@ def test_mismatched_derivative_widths_raise():
     ad.get_input_port(0).FixValue(context, InitializeAutoDiff(np.zeros((2, 1))).ravel())
     with pytest.raises(ValueError, match="derivative vectors of different lengths"):
         ad.EvalUniquePeriodicDiscreteUpdate(context)
+
+
+def _one_autodiff_step(plant, x0, u):
+    """One periodic update of ``plant`` in AutoDiffXd, x0 seeded: (x1, dx1/dx0, converged)."""
+    ad = plant.ToAutoDiffXd()
+    simulator = Simulator_[AutoDiffXd](ad)
+    context = simulator.get_mutable_context()
+    ad.SetInitialState(context, InitializeAutoDiff(x0.reshape(-1, 1)).ravel())
+    ad.u_port.FixValue(context, InitializeAutoDiff(u.reshape(-1, 1), np.zeros((2, 4))).ravel())
+    simulator.AdvanceTo(0.5 * H)  # the update at t = 0 only
+    (x,), (g,) = autodiff.split([ad.state_port.Eval(context)])
+    return x, g, ad.converged_port.Eval(context)[0].value()
+
+
+def test_unconverged_step_derivatives_are_dropped_flagged_or_raised():
+    from dataclasses import replace
+
+    from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
+    from drake_abs.lcp.ipm import LCPConvergenceWarning
+
+    good = point_mass_lcs(2, time_step=H)
+    starved = replace(good, solver_options={**good.solver_options, "max_iterations": 2})
+    x0, u = np.array([0.0, 0.01, 1.0, -1.0]), np.zeros(2)
+    x, g, ok = _one_autodiff_step(LcsPlant(good, H, ContactAware(1e-2, 0.05), "total"), x0, u)
+    assert ok == 1.0 and np.isfinite(g).all()
+    with pytest.warns(LCPConvergenceWarning), pytest.warns(UnconvergedStepWarning, match="drop"):
+        x2, g2, ok2 = _one_autodiff_step(LcsPlant(starved, H, ContactAware(1e-2, 0.05)), x0, u)
+    assert ok2 == 0.0 and np.isnan(g2).all() and np.isfinite(x2).all()
+    plant = LcsPlant(starved, H, ContactAware(1e-2, 0.05), on_unconverged="flag")
+    assert plant.ToAutoDiffXd().on_unconverged == "flag"
+    with pytest.warns(LCPConvergenceWarning), pytest.warns(UnconvergedStepWarning, match="kept"):
+        _, g3, ok3 = _one_autodiff_step(plant, x0, u)
+    assert ok3 == 0.0 and np.isfinite(g3).all()
+    with pytest.warns(LCPConvergenceWarning), pytest.raises(UnconvergedStepError):
+        _one_autodiff_step(LcsPlant(starved, H, on_unconverged="raise"), x0, u)
+    with pytest.raises(ValueError, match="on_unconverged"):
+        LcsPlant(good, H, on_unconverged="ignore")
