@@ -57,7 +57,6 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from dataclasses import dataclass
-from enum import IntEnum
 from typing import Literal
 
 import numpy as np
@@ -66,16 +65,9 @@ from drake_abs._validation import as_finite_array
 from drake_abs.lcp.ipm_kernel import solve
 from drake_abs.lcp.matrix_class import MatrixClass, classify_matrix
 from drake_abs.lcp.sensitivity import implicit_jacobians
+from drake_abs.lcp.status import LCPStatus
 
 OnBadMatrix = Literal["raise", "regularize", "attempt", "trusted"]
-
-
-class LCPStatus(IntEnum):
-    """Outcome of one LCP solve."""
-
-    CONVERGED = 0
-    MAX_ITERATIONS = 1
-    NUMERICAL_FAILURE = 2  # singular Newton matrix or a non-finite iterate; last finite kept
 
 
 class LCPConvergenceWarning(UserWarning):
