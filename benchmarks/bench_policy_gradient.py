@@ -94,7 +94,7 @@ def main(argv=None) -> int:
 
     box, policy, reward, theta, x0 = task()
     smoothing = ContactAware(mu_max=1e-3, length=0.02)
-    obj = PolicyObjective(box.stepper(smoothing), policy, reward, x0, H, SIGMA)
+    obj = PolicyObjective(box.stepper(smoothing, "frozen"), policy, reward, x0, H, SIGMA)
 
     warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted below
     first_order(obj, theta, np.random.default_rng(0), 8)  # compile the solver kernels

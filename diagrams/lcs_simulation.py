@@ -21,7 +21,7 @@ def add_lcs_plant(
     time_step: float,
     smoothing: SmoothingPolicy | None = None,
     *,
-    gradient: GradientMode = "frozen",
+    gradient: GradientMode = "total",
     u=None,
     name: str = "lcs",
 ) -> LcsPlant:
@@ -39,7 +39,7 @@ def make_lcs_diagram(
     time_step: float,
     smoothing: SmoothingPolicy | None = None,
     *,
-    gradient: GradientMode = "frozen",
+    gradient: GradientMode = "total",
     u=None,
     name: str = "lcs",
 ) -> Diagram:

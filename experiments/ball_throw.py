@@ -171,7 +171,8 @@ def smoothing_for(method: str, config: Config) -> SmoothingPolicy:
 
 def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> PolicyObjective:
     """The throw as a :class:`PolicyObjective` on the model smoothed by ``smoothing``."""
-    stepper = ThrowStepper(ball(config).stepper(smoothing), config.speed)
+    # frozen mu: paper 000 Algorithm 1, the method this experiment reproduces
+    stepper = ThrowStepper(ball(config).stepper(smoothing, "frozen"), config.speed)
     reward = QuadraticReward(
         Q=np.zeros((5, 5)), R=np.zeros((1, 1)), x_goal=np.array([config.goal, 0, 0, 0, 0]),
         Q_final=np.diag([1.0, 0, 0, 0, 0]),

@@ -147,7 +147,7 @@ class Task:
             from drake_abs.policy.rollout import LcsStepper
 
             lcs = point_mass_lcs(2, time_step=TIME_STEP)
-            self._stepper = lambda s: LcsStepper(lcs, s)
+            self._stepper = lambda s: LcsStepper(lcs, s, "frozen")  # paper 000 Algorithm 1
             self.policy = LinearPolicy(4, 2)
             self.reward = QuadraticReward(
                 Q=np.diag([1.0, 1.0, 0.0, 0.0]),
@@ -161,7 +161,7 @@ class Task:
             from drake_abs.multibody import build_scene_model
 
             model = build_scene_model("half_cheetah")
-            self._stepper = lambda s: model.stepper(smoothing=s)
+            self._stepper = lambda s: model.stepper(smoothing=s, gradient="frozen")
             nq, nv = len(model.q0), len(model.v0)
             nu = model.plant.num_actuators()
             self.x0 = np.concatenate([model.q0, model.v0])

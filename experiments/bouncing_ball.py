@@ -86,9 +86,10 @@ def simulate(config: BouncingBallConfig, *, meshcat=None) -> dict[str, np.ndarra
 
 
 def step_jacobians(config: BouncingBallConfig, states: np.ndarray, smoothing) -> np.ndarray:
-    """The implicit one-step Jacobians (N, 4, 4) along a logged trajectory: one batched call."""
+    """The implicit one-step Jacobians (N, 4, 4) along a logged trajectory (frozen mu, as paper
+    000 Algorithm 1 differentiates): one batched call."""
     lcs = point_mass_lcs(2, time_step=config.time_step, mass=config.mass, gravity=config.gravity)
-    return lcs.step(states[:-1], np.zeros(2), smoothing).dx_dx
+    return lcs.step(states[:-1], np.zeros(2), smoothing, gradient="frozen").dx_dx
 
 
 def contact_impulse_curves(config: BouncingBallConfig, z: np.ndarray) -> dict[str, np.ndarray]:

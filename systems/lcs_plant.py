@@ -44,7 +44,8 @@ def LcsPlant_(T):
             lcs: the system; its matrices already include the time step.
             time_step: update period in seconds (the h the LCS was built with).
             smoothing: per-contact mu policy (default Exact); larger mu is smoother.
-            gradient: ``"frozen"`` (paper 000 Algorithm 1) or ``"total"``.
+            gradient: ``"total"`` (default: AutoDiffXd gives the derivative of the simulation)
+                or ``"frozen"`` (paper 000 Algorithm 1; biased where mu depends on the state).
             on_unconverged: under AutoDiffXd, the derivatives of a step whose solve did not
                 converge: ``"drop"`` (default: NaN, with a warning), ``"flag"`` (kept, with a
                 warning) or ``"raise"`` (:mod:`drake_abs.contact.unconverged`).
@@ -55,7 +56,7 @@ def LcsPlant_(T):
             lcs: LCS,
             time_step: float,
             smoothing: SmoothingPolicy | None = None,
-            gradient: GradientMode = "frozen",
+            gradient: GradientMode = "total",
             on_unconverged: UnconvergedPolicy = "drop",
             converter=None,
         ):

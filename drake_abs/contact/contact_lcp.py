@@ -277,7 +277,7 @@ def contact_step(
     h: float,
     smoothing: SmoothingPolicy | None = None,
     *,
-    gradient: GradientMode = "frozen",
+    gradient: GradientMode = "total",
     strict: bool = False,
     **solver_options,
 ) -> ContactStepResult:

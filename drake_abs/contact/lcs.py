@@ -25,6 +25,9 @@ from drake_abs.lcp.ipm import (
     solve_lcp_trusted,
 )
 
+#: How a step differentiates a state-dependent mu: ``"total"`` (the default everywhere: the true
+#: derivative of the step) or ``"frozen"`` (mu held constant, paper 000 Algorithm 1; biased
+#: where mu varies with the state, exact for Exact and Fixed smoothing).
 GradientMode = Literal["frozen", "total"]
 
 
@@ -150,7 +153,7 @@ class LCS:
         u,
         smoothing: SmoothingPolicy | None = None,
         *,
-        gradient: GradientMode = "frozen",
+        gradient: GradientMode = "total",
         jacobians: bool = True,
         strict: bool = False,
     ) -> StepResult:
@@ -160,8 +163,9 @@ class LCS:
             x: (dx,) or (B, dx) states.
             u: (du,) or (B, du) inputs (one input broadcasts over the batch).
             smoothing: the per-contact mu policy (default :class:`Exact`); larger mu is smoother.
-            gradient: ``"frozen"`` treats mu as a constant (paper 000 Algorithm 1); ``"total"``
-                also differentiates mu(z) through z.
+            gradient: ``"total"`` (default) also differentiates mu(z) through z: the derivative
+                of the step as computed. ``"frozen"`` treats mu as a constant (paper 000
+                Algorithm 1): biased wherever mu depends on the state.
             jacobians: compute dx+/dx, dx+/du and the lam and mu Jacobians.
             strict: raise instead of warning when the LCP solve does not converge.
         """

@@ -53,7 +53,7 @@ def rollout(
     u,
     smoothing: SmoothingPolicy | None = None,
     *,
-    gradient: GradientMode = "frozen",
+    gradient: GradientMode = "total",
     jacobians: bool = True,
     on_unconverged: UnconvergedPolicy = "drop",
 ) -> Rollout:

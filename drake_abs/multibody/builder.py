@@ -93,7 +93,7 @@ class SceneModel:
         *,
         smoothing: SmoothingPolicy | None = None,
         activation_distance: float | None = None,
-        gradient: GradientMode = "frozen",
+        gradient: GradientMode = "total",
         **solver_options,
     ) -> ComplementarityStepper:
         """The scene's batched step, with the scene's smoothing policy and activation distance.

@@ -71,7 +71,7 @@ class ComplementarityStepper:
         self,
         model: ContactModelBase,
         smoothing: SmoothingPolicy | None = None,
-        gradient: GradientMode = "frozen",
+        gradient: GradientMode = "total",
         activation_distance: float = float("inf"),
         **solver_options,
     ):

@@ -61,7 +61,7 @@ class LcsStepper:
 
     lcs: LCS
     smoothing: SmoothingPolicy | None = None
-    gradient: GradientMode = "frozen"
+    gradient: GradientMode = "total"
 
     def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True):
         return self.lcs.step(x, u, self.smoothing, gradient=self.gradient, jacobians=jacobians)

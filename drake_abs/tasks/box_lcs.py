@@ -172,7 +172,7 @@ class TranslatingBox:
         )
 
     def stepper(
-        self, contact: SmoothingPolicy | None = None, gradient: GradientMode = "frozen"
+        self, contact: SmoothingPolicy | None = None, gradient: GradientMode = "total"
     ) -> LcsStepper:
         """A batched :class:`~drake_abs.policy.rollout.LcsStepper` of this box."""
         return LcsStepper(self.lcs, self.smoothing(contact), gradient)

@@ -162,3 +162,34 @@ def test_unconverged_step_derivatives_are_dropped_flagged_or_raised():
         _one_autodiff_step(LcsPlant(starved, H, on_unconverged="raise"), x0, u)
     with pytest.raises(ValueError, match="on_unconverged"):
         LcsPlant(good, H, on_unconverged="ignore")
+
+
+def test_default_derivative_is_the_true_one_everywhere():
+    """Without a gradient argument, AutoDiffXd through the diagram, the core rollout and the
+    batched steppers give the derivative of the simulation (``total``), which central
+    differences of the double diagram confirm; ``frozen`` is only ever asked for explicitly."""
+    import inspect
+
+    from drake_abs.contact.lcs import LCS
+    from drake_abs.multibody import ComplementarityStepper
+    from drake_abs.multibody.builder import SceneModel
+    from drake_abs.policy.rollout import LcsStepper
+    from drake_abs.tasks.box_lcs import TranslatingBox
+
+    for fn, name in [
+        (LCS.step, "gradient"), (rollout, "gradient"), (make_lcs_diagram, "gradient"),
+        (ComplementarityStepper.__init__, "gradient"), (SceneModel.stepper, "gradient"),
+        (TranslatingBox.stepper, "gradient"),
+    ]:  # fmt: skip
+        assert inspect.signature(fn).parameters[name].default == "total", fn
+    assert LcsStepper.__dataclass_fields__["gradient"].default == "total"
+    lcs = point_mass_lcs(2, time_step=H)
+    x0 = np.array([0.0, 0.25, 1.0, 0.3])
+    n, policy = 45, ContactAware(1e-2, 0.05, 1e-9)
+    diagram = make_lcs_diagram(lcs, H, policy, u=np.array([0.2, -1.0]))
+    g = simulate_with_gradient(diagram, x0, n)
+    fd = central_difference(lambda x: simulate_double(diagram, x, n), x0, eps=1e-7)
+    np.testing.assert_allclose(g.dx_final_dx0, fd, atol=1e-5 * (1 + np.abs(fd).max()))
+    frozen = simulate_with_gradient(make_lcs_diagram(lcs, H, policy, gradient="frozen",
+                                                     u=np.array([0.2, -1.0])), x0, n)  # fmt: skip
+    assert np.abs(frozen.dx_final_dx0 - fd).max() > 1e-3 * (1 + np.abs(fd).max())  # biased
