@@ -121,7 +121,8 @@ def main(argv=None) -> int:
         best = np.inf
         for _ in range(args.repeats):  # the same rollout, best of the repeats (as for ours)
             start = time.perf_counter()
-            J, grad = rollout_return(pd, theta, x0)
+            r = rollout_return(pd, theta, x0)
+            J, grad = r.value, r.gradient
             best = min(best, time.perf_counter() - start)
         drake_times.append(best)
         drake_grads.append(grad)

@@ -1,5 +1,5 @@
 """Plant + policy + reward diagrams, and the return J(theta) with dJ/dtheta of a rollout through
-AutoDiffXd (issue 4, 1).
+AutoDiffXd.
 
 Any plant of this project (:class:`~drake_abs.systems.LcsPlant`,
 :class:`~drake_abs.systems.ComplementarityPlant`) or a diagram holding a Drake MultibodyPlant
@@ -17,6 +17,7 @@ from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.multibody.plant import MultibodyPlant_
 from pydrake.systems.analysis import Simulator, Simulator_
 from pydrake.systems.framework import Diagram, DiagramBuilder, System
+from pydrake.systems.primitives import LogVectorOutput
 
 from drake_abs.systems import autodiff
 from drake_abs.systems.policy_systems import NoiseSource, PolicyController, RewardAccumulator
@@ -30,6 +31,24 @@ class PolicyDiagram:
     diagram: Diagram
     time_step: float
     horizon: int
+    monitors_convergence: bool = False  # the plant has a ``converged`` port, logged every step
+
+
+@dataclass(frozen=True)
+class RolloutReturn:
+    """The result of :func:`rollout_return`.
+
+    Attributes:
+        value: the return J (sum of the stage rewards and the terminal reward).
+        gradient: dJ/dtheta (P,), or None when not asked for. NaN when a step did not converge
+            and the plant drops such derivatives (its default ``on_unconverged="drop"``).
+        converged: whether every step's solve converged; None for a plant that does not say
+            (e.g. a Drake MultibodyPlant).
+    """
+
+    value: float
+    gradient: np.ndarray | None
+    converged: bool | None
 
 
 def build_policy_diagram(
@@ -46,8 +65,14 @@ def build_policy_diagram(
 ) -> PolicyDiagram:
     """Close ``plant`` (a System; its ports ``state_port`` (nx) and ``input_port`` (nu)) with
     ``u = pi(x; theta) + sigma xi_t``, xi_t the rows of ``noise`` (H, nu), and accumulate the
-    reward. The horizon H is the number of noise rows."""
+    reward. The horizon H is the number of noise rows (at least one). When the plant has a
+    ``converged`` output port (the plants of this package), it is logged at every step so that
+    :func:`rollout_return` can say whether every solve converged."""
     noise = np.asarray(noise, float)
+    if noise.ndim != 2 or noise.shape[0] < 1:
+        raise ValueError(
+            f"noise must have shape (H, nu) with H >= 1 (the horizon); got {noise.shape}"
+        )
     builder = DiagramBuilder()
     builder.AddNamedSystem("plant", plant)
     controller = builder.AddNamedSystem("policy", PolicyController(policy, theta, sigma))
@@ -60,7 +85,11 @@ def build_policy_diagram(
     builder.Connect(x_port, accumulator.state_port)
     builder.Connect(controller.u_port, accumulator.u_port)
     builder.ExportOutput(accumulator.return_port, "return")
-    return PolicyDiagram(builder.Build(), float(time_step), len(noise))
+    monitors = plant.HasOutputPort("converged")
+    if monitors:
+        log = LogVectorOutput(plant.GetOutputPort("converged"), builder, float(time_step))
+        log.set_name("converged_log")
+    return PolicyDiagram(builder.Build(), float(time_step), len(noise), monitors)
 
 
 def _default_set_state(plant: System, root_context, x0) -> None:
@@ -85,9 +114,13 @@ def rollout_return(
     *,
     gradient: bool = True,
     set_state: Callable | None = None,
-) -> tuple[float, np.ndarray | None]:
+) -> RolloutReturn:
     """The return of H steps from x0 and, with ``gradient``, dJ/dtheta (P,), by simulating the
-    diagram converted to AutoDiffXd with theta seeded by the identity."""
+    diagram converted to AutoDiffXd with theta seeded by the identity.
+
+    Nothing comes back bare: ``converged`` says whether every step's solve converged (for the
+    plants that report it); a non-finite return or gradient from steps that all converged
+    raises ``FloatingPointError``."""
     set_state = set_state or _default_set_state
     theta = np.asarray(theta, float)
     x0 = np.asarray(x0, float)
@@ -107,7 +140,21 @@ def rollout_return(
     # periodic events fire at t = 0, h, ..., the one at t = H h is not taken by AdvanceTo(H h)
     simulator.AdvanceTo(pd.horizon * pd.time_step)
     J = diagram.GetOutputPort("return").Eval(context)
-    if not gradient:
-        return float(J[0]), None
-    (value,), (grad,) = autodiff.split([J])
-    return float(value[0]), grad[0]
+    converged = None
+    if pd.monitors_convergence:
+        logger = diagram.GetSubsystemByName("converged_log")
+        flags = np.asarray(logger.FindLog(context).data()).ravel()
+        flags = np.array([f.value() if isinstance(f, AutoDiffXd) else f for f in flags], float)
+        converged = bool(np.all(flags >= 0.5))
+    if gradient:
+        (value,), (grad,) = autodiff.split([J])
+        value, grad = float(value[0]), grad[0]
+    else:
+        value, grad = float(J[0]), None
+    finite = np.isfinite(value) and (grad is None or np.all(np.isfinite(grad)))
+    if not finite and converged is not False:
+        raise FloatingPointError(
+            f"rollout_return: non-finite return {value!r} or gradient from a rollout whose "
+            "steps all converged (the state left the finite numbers?)"
+        )
+    return RolloutReturn(value, grad, converged)

@@ -167,6 +167,7 @@ def rollout_policy(
     rT, drT = reward.terminal(xs[:, H])
     returns += rT
     used = apply_unconverged_policy(conv, on_unconverged)
+    _check_finite(returns[used], "return")
     if not gradient:
         return PolicyRollout(xs, us, returns, conv, used)
     g_x = drT
@@ -176,6 +177,17 @@ def rollout_policy(
         gx_pi, gth_pi = policy.vjp(theta, xs[:, t], g_u)
         g_theta += gth_pi
         g_x = rx[:, t] + np.einsum("mi,mij->mj", g_x, Fx[:, t]) + gx_pi
+    _check_finite(g_theta[used], "gradient")
     g_theta[~used] = np.nan  # never averaged in silently
     g_x[~used] = np.nan
     return PolicyRollout(xs, us, returns, conv, used, g_theta, g_x)
+
+
+def _check_finite(values: np.ndarray, what: str) -> None:
+    """A usable rollout (every step converged, or kept under "flag") must have a finite return
+    and gradient: otherwise the state left the finite numbers, which is an error, not a result."""
+    if not np.all(np.isfinite(values)):
+        raise FloatingPointError(
+            f"rollout_policy: a rollout's {what} is not finite although its steps are usable "
+            "(the state or the policy left the finite numbers)"
+        )

@@ -49,8 +49,10 @@ def test_lcs_diagram_gradient_equals_the_batched_engine(policy, smoothing, gradi
         LcsPlant(lcs, H_STEP, smoothing, gradient), policy, reward, theta, noise, H_STEP,
         sigma=0.5, input_port="u",
     )  # fmt: skip
-    J, grad = rollout_return(pd, theta, x0)
-    J_double, _ = rollout_return(pd, theta, x0, gradient=False)
+    r = rollout_return(pd, theta, x0)
+    J, grad = r.value, r.gradient
+    assert r.converged is True
+    J_double = rollout_return(pd, theta, x0, gradient=False).value
     assert J == pytest.approx(engine.returns[0], rel=1e-12)
     assert J_double == pytest.approx(engine.returns[0], rel=1e-12)
     np.testing.assert_allclose(grad, engine.grad[0], rtol=1e-8, atol=1e-8 * np.abs(grad).max())
@@ -74,7 +76,8 @@ def test_rigid_body_scene_diagram_gradient_equals_the_batched_engine(rng):
         ComplementarityPlant(stepper), policy, reward, theta, noise, scene.time_step,
         sigma=0.5, input_port="actuation",
     )  # fmt: skip
-    J, grad = rollout_return(pd, theta, x0)
+    r = rollout_return(pd, theta, x0)
+    J, grad = r.value, r.gradient
     assert J == pytest.approx(engine.returns[0], rel=1e-12)
     np.testing.assert_allclose(grad, engine.grad[0], rtol=1e-8, atol=1e-8 * np.abs(grad).max())
 
@@ -94,10 +97,54 @@ def test_drake_multibody_plant_scene_in_the_loop(rng):
         twin.diagram, policy, reward, theta, np.zeros((10, 1)), scene.time_step,
         state_port="state", input_port="actuation",
     )  # fmt: skip
-    J, grad = rollout_return(pd, theta, x0)
+    r = rollout_return(pd, theta, x0)
+    J, grad = r.value, r.gradient
     eps = 1e-5
     e = np.zeros(theta.size)
     e[-1] = eps
-    fd = (rollout_return(pd, theta + e, x0, gradient=False)[0]
-          - rollout_return(pd, theta - e, x0, gradient=False)[0]) / (2 * eps)  # fmt: skip
+    fd = (rollout_return(pd, theta + e, x0, gradient=False).value
+          - rollout_return(pd, theta - e, x0, gradient=False).value) / (2 * eps)  # fmt: skip
     assert np.isfinite(J) and grad[-1] == pytest.approx(fd, rel=1e-4)
+
+
+def _ball_loop(lcs, theta_scale=0.2, horizon=30, rng=None):
+    rng = rng or np.random.default_rng(5)
+    policy = LinearPolicy(4, 2)
+    theta = theta_scale * rng.standard_normal(policy.n_params)
+    noise = rng.standard_normal((horizon, 2))
+    pd = build_policy_diagram(
+        LcsPlant(lcs, H_STEP, ContactAware(1e-2, 0.1)), policy, ball_reward(), theta, noise,
+        H_STEP, sigma=0.5, input_port="u",
+    )  # fmt: skip
+    return pd, theta, np.array([0.0, 0.3, 1.0, -1.0])
+
+
+def test_no_silent_results_on_the_diagram_path():
+    """A horizon of 0 is refused; an unconverged step is reported (and its derivatives are NaN,
+    the plant's default); the engine and the diagram agree on what they report."""
+    from dataclasses import replace
+
+    from drake_abs.contact.unconverged import UnconvergedStepWarning
+    from drake_abs.lcp.ipm import LCPConvergenceWarning
+
+    lcs = point_mass_lcs(2, time_step=H_STEP)
+    with pytest.raises(ValueError, match="H >= 1"):
+        build_policy_diagram(LcsPlant(lcs, H_STEP), LinearPolicy(4, 2), ball_reward(),
+                             np.zeros(10), np.zeros((0, 2)), H_STEP)  # fmt: skip
+    pd, theta, x0 = _ball_loop(lcs)
+    r = rollout_return(pd, theta, x0)
+    assert r.converged is True and np.isfinite(r.gradient).all()
+    starved = replace(lcs, solver_options={**lcs.solver_options, "max_iterations": 3})
+    pd, theta, x0 = _ball_loop(starved)
+    with pytest.warns(LCPConvergenceWarning), pytest.warns(UnconvergedStepWarning):
+        bad = rollout_return(pd, theta, x0)
+    assert bad.converged is False and np.isnan(bad.gradient).all()
+    assert rollout_return(pd, theta, x0, gradient=False).converged is False
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the policy's output overflows
+def test_a_non_finite_rollout_raises_instead_of_returning_bare():
+    lcs = point_mass_lcs(2, time_step=H_STEP)
+    pd, theta, x0 = _ball_loop(lcs, theta_scale=1e150, horizon=5)
+    with pytest.raises(ValueError, match="finite"):
+        rollout_return(pd, theta, x0)

@@ -290,3 +290,25 @@ def test_dropped_rollouts_carry_nan_gradients_and_every_estimator_honours_the_ma
     every = _Corrupting(inner, np.arange(4))
     with pytest.warns(UnconvergedStepWarning), pytest.raises(UnconvergedStepError, match="only 0"):
         first_order(_objective(every, "drop"), theta, rng, 4)
+
+
+def test_a_non_finite_return_of_a_usable_rollout_raises():
+    """Converged steps but a non-finite return (here a reward that overflows): an error, never a
+    result handed back bare."""
+    stepper, reward, x0, horizon = ball_task(Fixed(1e-3), "total", horizon=6)
+
+    class Overflowing:
+        def stage(self, x, u):
+            r, dx, du = reward.stage(x, u)
+            return r * np.inf, dx, du
+
+        def terminal(self, x):
+            return reward.terminal(x)
+
+    theta = np.zeros(LinearPolicy(NX, NU).n_params)
+    noise = np.zeros((2, horizon, NU))
+    with pytest.raises(FloatingPointError, match="return is not finite"):
+        rollout_policy(stepper, LinearPolicy(NX, NU), theta, x0, noise, Overflowing())
+    r = rollout_policy(stepper, LinearPolicy(NX, NU), theta, x0, np.zeros((2, 0, NU)), reward)
+    assert r.x.shape == (2, 1, NX) and np.all(r.grad == 0)  # H = 0: the initial state's value
+    np.testing.assert_allclose(r.returns, reward.terminal(r.x[:, 0])[0])
