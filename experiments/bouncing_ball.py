@@ -37,7 +37,7 @@ from drake_abs import (  # noqa: E402
 
 
 @dataclass(frozen=True)
-class BouncingBallConfig:
+class Config:
     """Scene and smoothing settings (SI units: s, m, kg, m/s)."""
 
     time_step: float = 0.01
@@ -52,6 +52,11 @@ class BouncingBallConfig:
     gaussian_sigma: float = 0.02
     meshcat: bool = True
 
+    @classmethod
+    def test_size(cls) -> Config:
+        """The reduced size CI runs (0.6 s: the first impact and the bounce)."""
+        return cls(duration=0.6)
+
     def cases(self) -> dict[str, SmoothingPolicy]:
         """Case name -> smoothing policy (larger mu = more smoothing)."""
         out: dict[str, SmoothingPolicy] = {"exact": Exact()}
@@ -62,7 +67,7 @@ class BouncingBallConfig:
         return out
 
 
-def simulate(config: BouncingBallConfig, *, meshcat=None) -> dict[str, np.ndarray]:
+def simulate(config: Config, *, meshcat=None) -> dict[str, np.ndarray]:
     """Run every case in one Drake diagram; returns name -> states (N + 1, 4) as logged."""
     from pydrake.systems.analysis import Simulator
 
@@ -85,14 +90,14 @@ def simulate(config: BouncingBallConfig, *, meshcat=None) -> dict[str, np.ndarra
     return {name: log.FindLog(context).data().T[: n + 1] for name, log in scene.state_logs.items()}
 
 
-def step_jacobians(config: BouncingBallConfig, states: np.ndarray, smoothing) -> np.ndarray:
+def step_jacobians(config: Config, states: np.ndarray, smoothing) -> np.ndarray:
     """The implicit one-step Jacobians (N, 4, 4) along a logged trajectory (frozen mu, as paper
     000 Algorithm 1 differentiates): one batched call."""
     lcs = point_mass_lcs(2, time_step=config.time_step, mass=config.mass, gravity=config.gravity)
     return lcs.step(states[:-1], np.zeros(2), smoothing, gradient="frozen").dx_dx
 
 
-def contact_impulse_curves(config: BouncingBallConfig, z: np.ndarray) -> dict[str, np.ndarray]:
+def contact_impulse_curves(config: Config, z: np.ndarray) -> dict[str, np.ndarray]:
     """Impulse lam(z) of each case's policy on a grid of contact distances z (m)."""
     F = np.array([[config.time_step / config.mass]])
     out = {}
@@ -102,10 +107,11 @@ def contact_impulse_curves(config: BouncingBallConfig, z: np.ndarray) -> dict[st
     return out
 
 
-def run(out_dir: str | Path, config: BouncingBallConfig | None = None) -> dict:
-    """Run the demo, write plots, the Meshcat HTML and summary.json to ``out_dir``."""
-    config = config or BouncingBallConfig()
-    out = Path(out_dir)
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Run the demo, write plots, the Meshcat HTML and summary.json to ``out`` (default
+    results/bouncing-ball)."""
+    config = config or Config()
+    out = Path(out or "results/bouncing-ball").resolve()
     out.mkdir(parents=True, exist_ok=True)
     meshcat = None
     if config.meshcat:
@@ -205,3 +211,17 @@ def _line_plot(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], axe
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def report(summary: dict) -> str:
+    """The numbers to look at, one line per case."""
+    lines = ["bouncing ball (paper 000, Figure 2): exact, BS and ABS side by side"]
+    for name, case in summary["cases"].items():
+        lines.append(
+            f"  {name:20s} min height {case['min_height_m']:+.4f} m, "
+            f"max |dv_y+/dy| {case['max_abs_dvy_plus_dy']:9.3g} 1/s, "
+            f"final v_y {case['final_vy_mps']:+.3f} m/s"
+        )
+    lines.append("files:")
+    lines += [f"  {path}" for path in summary["files"].values()]
+    return "\n".join(lines)

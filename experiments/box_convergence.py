@@ -131,7 +131,7 @@ def run_case(scene: Scene, steps: int, push: float) -> dict:
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    """Run the sweep; returns (and writes to ``out``/box_convergence.json) the table."""
+    """Run the sweep; returns (and writes to ``out``/summary.json) the table."""
     config = config or Config()
     rows = []
     grid = itertools.product(
@@ -158,7 +158,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     }
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
-        (Path(out) / "box_convergence.json").write_text(json.dumps(summary, indent=2))
+        (Path(out) / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
 

@@ -14,9 +14,11 @@ import sys
 from pathlib import Path
 
 # Experiment name -> module of drake_abs.experiments. Each module has ``Config`` (with a
-# ``test_size()`` constructor), ``run(config, out) -> dict`` and ``report(summary) -> str``.
-# The bouncing ball (also the demo) has its own runner below.
+# ``test_size()`` constructor), ``run(config=None, out=None) -> dict`` and
+# ``report(summary) -> str``. The demo is the bouncing ball with its own options.
 STANDARD_EXPERIMENTS: dict[str, str] = {
+    "bouncing-ball": "bouncing_ball",
+    "drake-comparison": "drake_comparison",
     "box-convergence": "box_convergence",
     "mpc-quadcopter": "mpc_quadcopter",
     "gradient-variance": "gradient_variance",
@@ -24,28 +26,17 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "ball-throw": "ball_throw",
     "smoothing-vs-rs": "smoothing_vs_rs",
 }
-EXPERIMENTS = ("bouncing-ball", "drake-comparison", *STANDARD_EXPERIMENTS)
+EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 
 
-def _run_bouncing_ball(out: Path, *, duration: float | None, meshcat: bool, test_size: bool) -> int:
-    from drake_abs.experiments.bouncing_ball import BouncingBallConfig, run
+def _run_demo(out: Path, *, duration: float | None, meshcat: bool) -> int:
+    from drake_abs.experiments.bouncing_ball import Config, report, run
 
     kwargs = {"meshcat": meshcat}
     if duration is not None:
         kwargs["duration"] = duration
-    elif test_size:
-        kwargs["duration"] = 0.6
-    summary = run(out, BouncingBallConfig(**kwargs))
-    print("bouncing ball (paper 000, Figure 2): exact, BS and ABS side by side")
-    for name, case in summary["cases"].items():
-        print(
-            f"  {name:20s} min height {case['min_height_m']:+.4f} m, "
-            f"max |dv_y+/dy| {case['max_abs_dvy_plus_dy']:9.3g} 1/s, "
-            f"final v_y {case['final_vy_mps']:+.3f} m/s"
-        )
-    print(f"results written to {out.resolve()}:")
-    for path in summary["files"].values():
-        print(f"  {path}")
+    print(report(run(Config(**kwargs), out)))
+    print(f"results written to {out.resolve()}")
     return 0
 
 
@@ -104,20 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "record":
         return _record(args.scene, args.steps, args.out)
     if args.command == "demo":
-        return _run_bouncing_ball(
-            Path(args.out), duration=args.duration, meshcat=not args.no_meshcat, test_size=False
-        )
+        return _run_demo(Path(args.out), duration=args.duration, meshcat=not args.no_meshcat)
     out = Path(args.out or f"results/{args.name}")
-    if args.name == "drake-comparison":
-        from drake_abs.experiments.drake_comparison import ComparisonConfig, report, run
-
-        config = ComparisonConfig.test_size() if args.test_size else ComparisonConfig()
-        print(report(run(out, config)))
-        print(f"results written to {out.resolve()}")
-        return 0
-    if args.name in STANDARD_EXPERIMENTS:
-        return _run_standard(STANDARD_EXPERIMENTS[args.name], out, test_size=args.test_size)
-    return _run_bouncing_ball(out, duration=None, meshcat=True, test_size=args.test_size)
+    return _run_standard(STANDARD_EXPERIMENTS[args.name], out, test_size=args.test_size)
 
 
 if __name__ == "__main__":

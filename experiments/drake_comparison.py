@@ -70,7 +70,7 @@ _PRETTY = {
 
 
 @dataclass(frozen=True)
-class ComparisonConfig:
+class Config:
     """Settings (SI units: s, m, kg, N). Larger mu is more smoothing.
 
     Attributes:
@@ -124,7 +124,7 @@ class ComparisonConfig:
     secant_fraction: float = 0.1
 
     @classmethod
-    def test_size(cls) -> ComparisonConfig:
+    def test_size(cls) -> Config:
         """The reduced size CI runs (under ~30 s): our plant at h only, no hydroelastic run."""
         return cls(fine_ours=False, hydroelastic=False)
 
@@ -145,7 +145,7 @@ class DrakeModel:
     plant: object
 
 
-def _material(config: ComparisonConfig):
+def _material(config: Config):
     from pydrake.geometry import AddContactMaterial, ProximityProperties
     from pydrake.multibody.plant import CoulombFriction
 
@@ -161,7 +161,7 @@ def _material(config: ComparisonConfig):
 
 
 def build_drake_model(
-    scene: str, approximation: str, time_step: float, config: ComparisonConfig, contact="point"
+    scene: str, approximation: str, time_step: float, config: Config, contact="point"
 ) -> DrakeModel:
     """Scene ``"box"`` or ``"ball"`` as a discrete Drake plant with ``approximation`` (``"sap"``,
     ``"similar"``, ``"lagged"``) and ``contact`` (``"point"`` or ``"hydroelastic"``, box only).
@@ -285,7 +285,7 @@ def drake_gradients(model: DrakeModel, x0, u, steps: int) -> dict:
 # The complementarity plant
 
 
-def our_scene(scene: str, time_step: float, config: ComparisonConfig, policy: str):
+def our_scene(scene: str, time_step: float, config: Config, policy: str):
     """Scene ``"box"`` or ``"ball"`` as a :class:`drake_abs.multibody.scene.Scene` under
     ``policy``."""
     from drake_abs.multibody.builder import PACKAGE_DIR
@@ -324,7 +324,7 @@ def our_scene(scene: str, time_step: float, config: ComparisonConfig, policy: st
     return Scene.from_dict(data)
 
 
-def our_stepper(scene: str, time_step: float, config: ComparisonConfig, policy: str):
+def our_stepper(scene: str, time_step: float, config: Config, policy: str):
     """The complementarity stepper of a scene (``total`` gradients: ABS's dmu/dz included)."""
     from drake_abs.multibody import make_stepper
 
@@ -366,7 +366,7 @@ def box_corner_heights(xs: np.ndarray) -> np.ndarray:
     return np.stack([z - s * a * np.sin(pitch) - c * np.cos(pitch) for s in (-1.0, 1.0)], axis=1)
 
 
-def analytic_slide(config: ComparisonConfig, time_step: float) -> dict:
+def analytic_slide(config: Config, time_step: float) -> dict:
     """The box's Coulomb slide over ``box_duration``: continuous ``v0^2 / (2 a)`` and discrete
     (semi-implicit Euler) ``h sum_k max(0, v0 - a h k)``, with deceleration ``a = mu g - u / m``
     (m = 1 kg); None if the push overcomes friction."""
@@ -426,7 +426,7 @@ def ball_metrics(xs: np.ndarray) -> dict:
     }
 
 
-def analytic_gradients(scene: str, config: ComparisonConfig) -> dict:
+def analytic_gradients(scene: str, config: Config) -> dict:
     """The KEY_ENTRIES of rigid bodies with continuous-time Coulomb friction (no compliance,
     no restitution): the box decelerates at ``a = mu g - u / m`` until it stops; the ball falls
     for ``t_l = sqrt(2 (z_0 - r) / g)``, lands inelastically and rolls at 5/7 of v_0. Left out:
@@ -470,7 +470,7 @@ KEY_ENTRIES = {
 # The experiment
 
 
-def _scene_setup(scene: str, config: ComparisonConfig):
+def _scene_setup(scene: str, config: Config):
     """(x_0 before settling, u, push duration, settle?)."""
     if scene == "box":
         x0 = np.array([0.0, BOX_HALF[1], 0.0, config.box_speed, 0.0, 0.0])
@@ -498,7 +498,7 @@ def _steps(duration: float, h: float) -> int:
 SLOPE = {"box": ("dx_T/dvx_0", 0, 3), "ball": ("dy_T/dvy_0", 1, 7)}
 
 
-def simulate_scene(scene: str, h: float, config: ComparisonConfig, *, gradients: bool,
+def simulate_scene(scene: str, h: float, config: Config, *, gradients: bool,
                    ours: bool = True) -> dict:  # fmt: skip
     """Every model of one scene at time step h: trajectories, metrics, and (``gradients``)
     d x_T / d x_0, d x_T / d u and a check of one slope (``SLOPE``) against a local central
@@ -574,7 +574,7 @@ def simulate_scene(scene: str, h: float, config: ComparisonConfig, *, gradients:
     return {"time_step": h, "steps": n, "analytic": analytic, "models": results}
 
 
-def _gradient_summary(scene: str, res: dict, config: ComparisonConfig) -> dict:
+def _gradient_summary(scene: str, res: dict, config: Config) -> dict:
     models = res["models"]
     nq = models["sap"]["xs"].shape[1] // 2
     full = {k: np.hstack([m["dx_dx0"], m["dx_du"]]) for k, m in models.items() if "dx_dx0" in m}
@@ -598,11 +598,12 @@ def _gradient_summary(scene: str, res: dict, config: ComparisonConfig) -> dict:
             "matrices": {k: J.tolist() for k, J in full.items()}}  # fmt: skip
 
 
-def run(out_dir: str | Path, config: ComparisonConfig | None = None) -> dict:
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Run both scenes under every model; write comparison.json, comparison.md,
-    trajectories.png and gradients.png to ``out_dir``; return the summary."""
-    config = config or ComparisonConfig()
-    out = Path(out_dir)
+    trajectories.png and gradients.png to ``out`` (default results/drake-comparison); return
+    the summary."""
+    config = config or Config()
+    out = Path(out or "results/drake-comparison").resolve()
     out.mkdir(parents=True, exist_ok=True)
     runs = {}
     for scene in ("box", "ball"):

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from drake_abs.experiments.bouncing_ball import BouncingBallConfig, run
+from drake_abs.experiments.bouncing_ball import Config, run
 from drake_abs.experiments.cli import main
 
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
-    return out, run(out, BouncingBallConfig(duration=0.6))
+    return out, run(Config(duration=0.6), out)
 
 
 def test_demo_writes_every_file(demo):

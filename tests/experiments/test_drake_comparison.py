@@ -32,7 +32,7 @@ from PIL import Image
 from drake_abs.experiments.drake_comparison import (
     DRAKE,
     OURS,
-    ComparisonConfig,
+    Config,
     analytic_slide,
     run,
     simulate_scene,
@@ -42,8 +42,8 @@ from drake_abs.experiments.drake_comparison import (
 @pytest.fixture(scope="module")
 def comparison(tmp_path_factory):
     out = tmp_path_factory.mktemp("drake_comparison")
-    config = ComparisonConfig.test_size()
-    return out, config, run(out, config)
+    config = Config.test_size()
+    return out, config, run(config, out)
 
 
 def _numbers(obj, path=""):
@@ -159,7 +159,7 @@ def test_ball_initial_speed_gradient_against_the_rolling_answer(comparison):
 
 
 def test_deterministic():
-    config = ComparisonConfig.test_size()
+    config = Config.test_size()
     a = simulate_scene("box", config.time_step, config, gradients=False)
     b = simulate_scene("box", config.time_step, config, gradients=False)
     for name in a["models"]:
