@@ -44,7 +44,7 @@ respect to q, v and u come from the caller (e.g. Drake AutoDiffXd).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba as nb
 import numpy as np
@@ -175,6 +175,27 @@ class StepQuantities:
 
 
 @dataclass(frozen=True)
+class ParameterDerivatives:
+    """Derivatives of one step's quantities with respect to T model parameters theta, for a
+    batch of B states: the theta block, kept apart from the (q, v, u) columns of
+    :class:`StepQuantities` so that the two can never be mixed.
+
+    Attributes:
+        dphi: (B, nc, T) derivative of the contact distances (e.g. -1 for the ground height).
+        dfriction: (nf, T) derivative of the friction coefficients of the cone's frictional
+            contacts, in the cone's order (e.g. 1 in the column of that contact's coefficient).
+        dW: (B, nv, nv, T) derivative of the inverse mass matrix (e.g. for body masses), or
+            None where no parameter moves it.
+        dv_free: (B, nv, T) derivative of the free velocity, or None likewise.
+    """
+
+    dphi: np.ndarray
+    dfriction: np.ndarray
+    dW: np.ndarray | None = None
+    dv_free: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class ContactStepResult:
     """One batched rigid-body step.
 
@@ -186,6 +207,8 @@ class ContactStepResult:
         dx_dx: (B, nq + nv, nq + nv), dx_du: (B, nq + nv, nu), dlam_dx, dlam_du: Jacobians
             (None unless the quantities carry derivatives).
         lcp: the solver's result (None when no contact was active: no LCP was solved).
+        dx_dtheta: (B, nq + nv, T), dlam_dtheta: (B, d, T): derivatives with respect to the
+            model parameters of ``parameters`` (None unless asked for).
     """
 
     q_next: np.ndarray
@@ -198,6 +221,8 @@ class ContactStepResult:
     dlam_dx: np.ndarray | None
     dlam_du: np.ndarray | None
     lcp: LCPResult | None
+    dx_dtheta: np.ndarray | None = None
+    dlam_dtheta: np.ndarray | None = None
 
 
 def assemble_lcp(
@@ -279,14 +304,18 @@ def contact_step(
     *,
     gradient: GradientMode = "total",
     strict: bool = False,
+    parameters: ParameterDerivatives | None = None,
     **solver_options,
 ) -> ContactStepResult:
     """Advance a batch of rigid-body states one step (see the module docstring).
 
-    Jacobians are computed when ``quant`` carries derivatives. ``solver_options`` go to
+    Jacobians are computed when ``quant`` carries derivatives; with ``parameters`` (which needs
+    them), also ``dx_dtheta`` and ``dlam_dtheta``. ``solver_options`` go to
     :func:`drake_abs.solve_lcp` (tol, max_iterations, exact_tol; defaults in
     :data:`CONTACT_SOLVER_DEFAULTS`).
     """
+    if parameters is not None and not quant.has_derivatives:
+        raise ValueError("parameter derivatives need quantities with derivatives")
     check_gradient_mode(gradient)
     if not (np.isfinite(h) and h > 0):
         raise ValueError(f"h must be a finite number > 0; got {h!r}")
@@ -298,7 +327,17 @@ def contact_step(
             f"and Jt {quant.Jt.shape[1]} rows; the cone expects {nc} and {nt}"
         )
     if nc == 0:
-        return _free_step(quant, h)
+        r = _free_step(quant, h)
+        if parameters is None:
+            return r
+        T = parameters.dphi.shape[-1]
+        B, nx = r.dx_dx.shape[:2]
+        dv = np.zeros((B, nx - quant.q.shape[1], T))
+        if parameters.dv_free is not None:  # free flight: only the free velocity moves
+            dv = parameters.dv_free
+        dq = h * np.einsum("bqn,bnt->bqt", quant.N, dv)
+        dx = np.concatenate([dq, dv], axis=1)
+        return replace(r, dx_dtheta=dx, dlam_dtheta=np.zeros((B, 0, T)))
     F, z, S = assemble_lcp(quant, cone, h)
     Fnn = F[:, :nc, :nc]
     mu_n = smoothing.mu(z[:, :nc], Fnn)
@@ -324,6 +363,10 @@ def contact_step(
         out = _step_jacobians(
             quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient
         )
+        if parameters is not None:
+            out["dx_dtheta"], out["dlam_dtheta"] = _parameter_jacobians(
+                quant, cone, h, F, z, G, lam, lcp, smoothing, gradient, parameters
+            )
     return ContactStepResult(
         q_next=q_next,
         v_next=v_next,
@@ -419,6 +462,49 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing
     return dict(
         dx_dx=dx[:, :, :nx], dx_du=dx[:, :, nx:], dlam_dx=dlam[:, :, :nx], dlam_du=dlam[:, :, nx:]
     )
+
+
+def _parameter_jacobians(quant, cone, h, F, z, G, lam, lcp, smoothing, gradient, par):
+    """``dx+/dtheta`` (B, nq + nv, T) and ``dlam/dtheta`` (B, d, T) at fixed (q, v, u).
+
+    theta moves the normal rows' offsets (``dz_n = dphi``), the cone rows' matrix entries
+    (``F[cone f, gamma f] = alpha_f``, so ``(dF lam)_f = dalpha_f gamma_f``) and, through W and
+    v_free (masses), the velocity rows: ``S G (dv_free + dW f)`` with ``f = G^T lam``. Then, as
+    for (q, v, u), ``dlam = (dlam/dz)(dz + dF lam)`` plus, in the total mode, mu's dependence on
+    z_n (``dphi + h Jn dv_free``; F_nn held, as for p); ``dv+ = dv_free + dW f + W G^T dlam``
+    and ``dq+ = h N dv+`` (G and N do not depend on these parameters)."""
+    nc, nt, nf = cone.sizes()
+    B, d = z.shape
+    T = par.dphi.shape[-1]
+    if par.dphi.shape != (B, nc, T) or par.dfriction.shape != (nf, T):
+        raise ValueError(
+            f"parameter derivatives must be dphi (B, nc, T) = ({B}, {nc}, T) and dfriction "
+            f"(nf, T) = ({nf}, T); got {par.dphi.shape} and {par.dfriction.shape}"
+        )
+    r = nc + nt
+    nv = quant.W.shape[-1]
+    dz = np.zeros((B, d, T))
+    dz[:, :nc] = par.dphi
+    dz[:, r:] = lam[:, cone.frictional, None] * par.dfriction[None]
+    inner = np.zeros((B, nv, T))  # dv_free + dW f: the velocity change at fixed impulses
+    if par.dv_free is not None:
+        inner += par.dv_free
+    if par.dW is not None:
+        f = np.einsum("bin,bi->bn", G, lam[:, :r])
+        inner += np.einsum("bnmt,bm->bnt", par.dW, f)
+    S = np.ones(r)
+    S[:nc] = h
+    dz[:, :r] += S[None, :, None] * np.einsum("bin,bnt->bit", G, inner)
+    dlam = lcp.dlam_dq @ dz
+    if gradient == "total":
+        dzn = par.dphi.copy()
+        if par.dv_free is not None:
+            dzn += h * np.einsum("bin,bnt->bit", quant.Jn, par.dv_free)
+        dmu_rows = expand_mu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
+        dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
+    dv = inner + np.einsum("bnm,bim,bit->bnt", quant.W, G, dlam[:, :r])
+    dq = h * np.einsum("bqn,bnt->bqt", quant.N, dv)
+    return np.concatenate([dq, dv], axis=1), dlam
 
 
 @nb.njit(cache=True)

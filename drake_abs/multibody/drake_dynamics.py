@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
 
@@ -116,6 +116,52 @@ class ContactModelBase(ABC):
     @abstractmethod
     def _setup(self) -> None:
         """Provider-specific set-up, after the shared attributes exist."""
+
+    @property
+    def massive_bodies(self) -> tuple[str, ...]:
+        """Names of the plant's bodies with a positive mass (the mass parameters of
+        :meth:`mass_derivatives`; massless helper bodies, such as a floating base's chain, are
+        left out)."""
+        plant, ctx = self.plant, self.plant.CreateDefaultContext()
+        out = []
+        for i in range(plant.num_bodies()):
+            body = plant.get_body(BodyIndex(i))
+            if body.index() != plant.world_body().index() and body.get_mass(ctx) > 0.0:
+                out.append(body.name())
+        return tuple(out)
+
+    def mass_derivatives(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(dW, dv_free)``: the derivatives of W = M^-1 (B, nv, nv, T) and of the free velocity
+        (B, nv, T) with respect to the masses of :attr:`massive_bodies` (each body's mass
+        scaled with its centre of mass and unit inertia held, as ``RigidBody.SetMass`` does),
+        at the states q (B, nq), v (B, nv) and inputs u (B, nu). Evaluated through an
+        AutoDiffXd copy of the plant, whatever the provider; contacts do not depend on mass."""
+        names = self.massive_bodies
+        T = len(names)
+        if not hasattr(self, "_mass_plant"):
+            self._mass_plant = self.plant.ToAutoDiffXd()
+        plant = self._mass_plant
+        ctx = plant.CreateDefaultContext()
+        for k, name in enumerate(names):
+            body = plant.GetBodyByName(name)
+            m = body.get_mass(ctx).value()
+            body.SetMass(ctx, AutoDiffXd(m, np.eye(T)[k]))
+        B, nv = v.shape
+        dW = np.zeros((B, nv, nv, T))
+        dv_free = np.zeros((B, nv, T))
+        for b in range(B):
+            plant.SetPositions(ctx, np.array([AutoDiffXd(x) for x in q[b]]))
+            plant.SetVelocities(ctx, np.array([AutoDiffXd(x) for x in v[b]]))
+            M, dM = _split(plant.CalcMassMatrix(ctx), T)
+            tau_ad = plant.CalcGravityGeneralizedForces(ctx) - plant.CalcBiasTerm(ctx)
+            tau, dtau = _split(tau_ad, T)
+            tau = tau + self.B_act @ u[b]  # the actuation does not depend on mass
+            W = np.linalg.inv(M)
+            dW[b] = -np.moveaxis(W @ np.moveaxis(dM, -1, 0) @ W, 0, -1)
+            dv_free[b] = self.h * (np.einsum("ijt,j->it", dW[b], tau) + W @ dtau)
+        return dW, dv_free
 
     def cone_for(self, active: np.ndarray) -> FrictionCone:
         """The friction cone of a subset of the contacts (indices)."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import contact_step
+from drake_abs.contact.contact_lcp import ParameterDerivatives, contact_step
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.multibody.drake_dynamics import ContactModelBase
@@ -40,6 +40,9 @@ class RigidStepResult:
         iterations: (B,) interior-point iterations (0 without an LCP).
         dx_dx, dx_du: (B, nx, nx), (B, nx, nu); dn_dx, dn_du: (B, nc, nx), (B, nc, nu) for the
             normal impulses (None unless Jacobians were asked for).
+        dx_dtheta, dn_dtheta: (B, nx, T), (B, nc, T): derivatives with respect to the model
+            parameters named by ``theta_names`` (None unless asked for with
+            ``parameters=True``). A block of its own: never part of dx_du.
     """
 
     x_next: np.ndarray
@@ -53,6 +56,9 @@ class RigidStepResult:
     dx_du: np.ndarray | None = None
     dn_dx: np.ndarray | None = None
     dn_du: np.ndarray | None = None
+    dx_dtheta: np.ndarray | None = None
+    dn_dtheta: np.ndarray | None = None
+    theta_names: tuple[str, ...] = ()
 
 
 class ComplementarityStepper:
@@ -88,8 +94,47 @@ class ComplementarityStepper:
         m = self.model
         return m.nq, m.nv, m.nu, len(m.contacts)
 
-    def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True) -> RigidStepResult:
-        """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared."""
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The model parameters ``step(..., parameters=True)`` differentiates with respect to,
+        in column order: ``"ground_height"`` (m), ``"friction[i]"`` for every frictional contact
+        candidate i (its Coulomb coefficient), then ``"mass[body]"`` (kg) for every body with a
+        mass (its centre of mass and unit inertia held)."""
+        if not hasattr(self, "_parameter_names"):
+            coeff = self.model.cone_for(np.arange(self.sizes[3])).coefficients
+            self._parameter_names = (
+                ("ground_height",)
+                + tuple(f"friction[{i}]" for i in np.flatnonzero(~np.isnan(coeff)))
+                + tuple(f"mass[{name}]" for name in self.model.massive_bodies)
+            )
+        return self._parameter_names
+
+    def _parameter_derivatives(self, idx, cone, q, v, u) -> ParameterDerivatives:
+        """The theta block of one group's quantities (states q, v, u): every contact's distance
+        falls by the ground height's increase; each frictional contact's coefficient is its own
+        column; the masses move W and the free velocity."""
+        names = self.parameter_names
+        column = {name: j for j, name in enumerate(names)}
+        B, T = q.shape[0], len(names)
+        dphi = np.zeros((B, idx.size, T))
+        dphi[:, :, 0] = -1.0
+        dfriction = np.zeros((cone.frictional.size, T))
+        for f, local in enumerate(cone.frictional):
+            dfriction[f, column[f"friction[{idx[local]}]"]] = 1.0
+        masses = [column[f"mass[{name}]"] for name in self.model.massive_bodies]
+        dW = np.zeros((B,) + (self.sizes[1],) * 2 + (T,))
+        dv_free = np.zeros((B, self.sizes[1], T))
+        if masses:
+            dW[..., masses], dv_free[..., masses] = self.model.mass_derivatives(q, v, u)
+        return ParameterDerivatives(dphi, dfriction, dW, dv_free)
+
+    def step(
+        self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True, parameters: bool = False
+    ) -> RigidStepResult:
+        """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared. With ``parameters`` (and
+        ``jacobians``), also the derivatives with respect to :attr:`parameter_names`."""
+        if parameters and not jacobians:
+            raise ValueError("parameters=True needs jacobians=True")
         nq, nv, nu, nc = self.sizes
         x = np.asarray(x, dtype=float)
         if x.ndim == 1:
@@ -131,16 +176,27 @@ class ComplementarityStepper:
                 dn_dx=np.zeros((B, nc, nq + nv)),
                 dn_du=np.zeros((B, nc, nu)),
             )
+        if parameters:
+            T = len(self.parameter_names)
+            out.update(dx_dtheta=np.empty((B, nq + nv, T)), dn_dtheta=np.zeros((B, nc, T)))
         if groups is None:
             groups = _groups_by_active_set(active)
         for rows, idx, quant in groups:
             if quant is None:
                 quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
             cone = self.model.cone_for(idx)
+            par = None
+            if parameters:
+                par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows])
             r = contact_step(
                 quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
-                **self.solver_options,
+                parameters=par, **self.solver_options,
             )  # fmt: skip
+            if jacobians and r.dx_du.shape[-1] != nu:  # the (q, v, u) columns, checked
+                raise ValueError(
+                    f"the dynamics provider's derivatives have {r.dx_du.shape[-1]} input "
+                    f"columns after (q, v); the model has nu = {nu}"
+                )
             self._scatter(out, rows, idx, cone, r, jacobians)
         finite = np.isfinite(out["x_next"]).all(axis=1)
         if jacobians:
@@ -155,7 +211,8 @@ class ComplementarityStepper:
                 StepOverflowWarning,
                 stacklevel=2,
             )
-        return RigidStepResult(active=active, **out)
+        names = self.parameter_names if parameters else ()
+        return RigidStepResult(active=active, theta_names=names, **out)
 
     def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
         """Write one group's step into the batch outputs (rows: a slice or row indices)."""
@@ -167,6 +224,8 @@ class ComplementarityStepper:
         if jacobians:  # also without contact (free flight): the Jacobian is the free step's
             out["dx_dx"][rows] = r.dx_dx
             out["dx_du"][rows] = r.dx_du
+        if r.dx_dtheta is not None:
+            out["dx_dtheta"][rows] = r.dx_dtheta
         if r.lcp is None:
             return
         out["iterations"][rows] = r.lcp.iterations
@@ -181,6 +240,8 @@ class ComplementarityStepper:
         ]
         if jacobians:
             blocks += [("dn_dx", idx, r.dlam_dx[:, :nc_g]), ("dn_du", idx, r.dlam_du[:, :nc_g])]
+        if r.dlam_dtheta is not None:
+            blocks.append(("dn_dtheta", idx, r.dlam_dtheta[:, :nc_g]))
         for key, cols, value in blocks:
             if whole:
                 out[key][:, cols] = value

@@ -1,0 +1,128 @@
+"""Derivatives of a rigid-body step with respect to model parameters theta (the ground height,
+each contact's friction coefficient, each body's mass): their own named block (``dx_dtheta``,
+``theta_names``), never mixed into dx_du, and equal to central differences of steps of re-built
+scenes (for the mass: the model file re-written with the mass and inertia scaled)."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drake_abs.contact.smoothing import ContactAware, Exact
+from drake_abs.multibody import PACKAGE_DIR, Scene, build_scene_model
+
+EPS = 1e-6
+
+
+def _states(name: str, model):
+    """A state in contact (sliding, for the box and the ball), and an input, per scene."""
+    if name == "box_push":  # resting on its two bottom corners, sliding at 1 m/s, pushed
+        return model.x0, np.full(model.contact_model.nu, 3.0)
+    if name == "hopper":  # the foot 5 cm up, falling at 6 m/s: lands within the step; torques
+        x = model.x0.copy()
+        x[model.contact_model.nq + 1] = -6.0
+        return x, np.array([4.0, -3.0])
+    x = model.x0.copy()  # ball_throw: the ball just above the ground, moving down and sideways
+    x[2], x[6], x[7], x[8] = 0.0505, 3.0, 1.0, -0.6  # too fast to reach rolling in a step
+    return x, np.zeros(model.contact_model.nu)
+
+
+def _next_state(scene: Scene, smoothing, x, u) -> np.ndarray:
+    step = build_scene_model(scene).stepper(smoothing=smoothing).step(x[None], u, jacobians=False)
+    assert step.converged.all()
+    return step.x_next[0]
+
+
+def _with_mass(scene: Scene, body: str, factor: float, folder: Path) -> Scene:
+    """The scene with ``body``'s mass and rotational inertia scaled by ``factor`` (centre of
+    mass and unit inertia held, as Drake's ``RigidBody::SetMass``), through a re-written SDF."""
+    spec = scene.models[0]
+    text = (PACKAGE_DIR / spec.file.removeprefix("drake_abs:")).read_text()
+    link = re.search(rf'<link name="{body}">.*?</inertial>', text, flags=re.S)
+    scaled = re.sub(
+        r"<(mass|ixx|iyy|izz|ixy|ixz|iyz)>([^<]+)</\1>",
+        lambda m: f"<{m.group(1)}>{float(m.group(2)) * factor!r}</{m.group(1)}>",
+        link.group(0),
+    )
+    path = folder / f"{body}_{factor!r}.sdf"
+    path.write_text(text[: link.start()] + scaled + text[link.end() :])
+    return replace(scene, models=(replace(spec, file=str(path)),))
+
+
+def _with_friction(scene: Scene, k: int, delta: float) -> Scene:
+    """The scene with contact spec k's friction coefficient moved by delta."""
+    contacts = list(scene.contacts)
+    contacts[k] = replace(contacts[k], friction=contacts[k].friction + delta)
+    return replace(scene, contacts=tuple(contacts))
+
+
+# which derivatives must be non-zero here (the physics says so; "non-zero" is above 1e-5, far
+# above the central differences' noise of about 1e-9): a free ball's step does not depend on
+# its mass (every impulse scales with it); the hopper's foot sticks on landing
+DEPENDS = {
+    "box_push": {"ground", "friction", "mass"},
+    "ball_throw": {"ground", "friction"},
+    "hopper": {"ground", "mass"},
+}
+
+
+@pytest.mark.parametrize("name", sorted(DEPENDS))
+@pytest.mark.parametrize("smoothing", [Exact(), ContactAware(1e-3, 0.02)], ids=["exact", "abs"])
+def test_parameter_jacobians_match_central_differences(name, smoothing, tmp_path):
+    scene = Scene.load(name)
+    model = build_scene_model(scene)
+    stepper = model.stepper(smoothing=smoothing)
+    x, u = _states(name, model)
+    r = stepper.step(x[None], u, parameters=True)
+    assert r.converged.all() and r.active.any()
+    names = stepper.parameter_names
+    assert r.theta_names == names and names[0] == "ground_height"
+    nc = len(model.contact_model.contacts)
+    assert names[1 : 1 + nc] == tuple(f"friction[{i}]" for i in range(nc))  # all frictional
+    bodies = model.contact_model.massive_bodies  # the floating base's chain is massless
+    assert names[1 + nc :] == tuple(f"mass[{b}]" for b in bodies)
+    nx = x.size
+    assert r.dx_dtheta.shape == (1, nx, len(names)) and r.dx_du.shape == (1, nx, u.size)
+    assert r.dn_dtheta.shape == (1, nc, len(names))
+    scale = 1.0 + np.abs(r.dx_dtheta).max()
+    # ground height
+    fd = (
+        _next_state(replace(scene, ground_height=scene.ground_height + EPS), smoothing, x, u)
+        - _next_state(replace(scene, ground_height=scene.ground_height - EPS), smoothing, x, u)
+    ) / (2 * EPS)
+    assert np.abs(fd).max() > 1e-5 or "ground" not in DEPENDS[name]
+    np.testing.assert_allclose(r.dx_dtheta[0, :, 0], fd, atol=1e-5 * scale)
+    # friction: one spec moves the coefficient of all its points (the sum of their columns)
+    start = 0
+    for k, spec in enumerate(scene.contacts):
+        cols = [1 + start + j for j in range(len(spec.points))]
+        start += len(spec.points)
+        fd = (
+            _next_state(_with_friction(scene, k, EPS), smoothing, x, u)
+            - _next_state(_with_friction(scene, k, -EPS), smoothing, x, u)
+        ) / (2 * EPS)
+        assert np.abs(fd).max() > 1e-5 or "friction" not in DEPENDS[name]
+        np.testing.assert_allclose(r.dx_dtheta[0][:, cols].sum(axis=1), fd, atol=1e-5 * scale)
+    # each mass: scaled by 1 +- eps / m
+    for j, body in enumerate(bodies):
+        m = model.plant.GetBodyByName(body).default_mass()
+        fd = (
+            _next_state(_with_mass(scene, body, 1 + EPS / m, tmp_path), smoothing, x, u)
+            - _next_state(_with_mass(scene, body, 1 - EPS / m, tmp_path), smoothing, x, u)
+        ) / (2 * EPS)
+        assert np.abs(fd).max() > 1e-5 or "mass" not in DEPENDS[name]
+        np.testing.assert_allclose(r.dx_dtheta[0, :, 1 + nc + j], fd, atol=1e-5 * scale)
+
+
+def test_parameter_jacobians_in_free_flight_are_zero_and_need_jacobians():
+    model = build_scene_model("ball_throw")
+    stepper = model.stepper()
+    r = stepper.step(model.x0[None], np.zeros(model.contact_model.nu), parameters=True)
+    assert not r.active.any() and not r.dx_dtheta.any()
+    with pytest.raises(ValueError, match="jacobians"):
+        stepper.step(model.x0[None], np.zeros(model.contact_model.nu), jacobians=False,
+                     parameters=True)  # fmt: skip
