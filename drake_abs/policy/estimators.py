@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drake_abs.policy.policies import Policy
+from drake_abs.policy.rewards import Reward
 from drake_abs.policy.rollout import (
     PolicyRollout,
     Stepper,
@@ -53,8 +55,8 @@ class PolicyObjective:
     """
 
     stepper: Stepper
-    policy: object
-    reward: object
+    policy: Policy
+    reward: Reward
     x0: np.ndarray
     horizon: int
     sigma: float = 0.1
@@ -62,6 +64,15 @@ class PolicyObjective:
 
     def __post_init__(self):
         check_unconverged_policy(self.on_unconverged)
+        if not isinstance(self.policy, Policy):
+            raise TypeError(
+                "policy must be a Policy (nx, nu, n_params, act, jacobians, vjp); "
+                f"got {type(self.policy).__name__}"
+            )
+        if not isinstance(self.reward, Reward):
+            raise TypeError(
+                f"reward must be a Reward (stage, terminal); got {type(self.reward).__name__}"
+            )
         if int(self.horizon) < 1:
             raise ValueError(f"horizon must be >= 1; got {self.horizon!r}")
         if not (np.isfinite(self.sigma) and self.sigma >= 0):

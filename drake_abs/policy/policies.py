@@ -15,10 +15,28 @@ Every policy gives, for states x (M, nx) and a flat parameter vector theta (P,):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from drake_abs._validation import as_finite_array
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What rollouts need of a policy (see the module docstring for shapes)."""
+
+    nx: int
+    nu: int
+
+    @property
+    def n_params(self) -> int: ...
+
+    def act(self, theta, x) -> np.ndarray: ...
+
+    def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def _check(theta, x, n_params: int, nx: int) -> tuple[np.ndarray, np.ndarray]:

@@ -11,10 +11,20 @@ Rewards are maximised: costs enter with a minus sign.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from drake_abs._validation import as_finite_array
+
+
+@runtime_checkable
+class Reward(Protocol):
+    """What rollouts need of a reward (maximised; see the module docstring for shapes)."""
+
+    def stage(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def terminal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,8 @@ from drake_abs.contact.unconverged import (
     apply_unconverged_policy,
     check_unconverged_policy,
 )
+from drake_abs.policy.policies import Policy
+from drake_abs.policy.rewards import Reward
 
 __all__ = [
     "LcsStepper",
@@ -103,11 +105,11 @@ def rollout_memory_bytes(M: int, H: int, nx: int, nu: int) -> int:
 
 def rollout_policy(
     stepper: Stepper,
-    policy,
+    policy: Policy,
     theta,
     x0,
     noise,
-    reward,
+    reward: Reward,
     *,
     sigma: float = 1.0,
     gradient: bool = True,

@@ -312,3 +312,11 @@ def test_a_non_finite_return_of_a_usable_rollout_raises():
     r = rollout_policy(stepper, LinearPolicy(NX, NU), theta, x0, np.zeros((2, 0, NU)), reward)
     assert r.x.shape == (2, 1, NX) and np.all(r.grad == 0)  # H = 0: the initial state's value
     np.testing.assert_allclose(r.returns, reward.terminal(r.x[:, 0])[0])
+
+
+def test_the_objective_checks_its_policy_and_reward_protocols():
+    stepper, reward, x0, horizon = ball_task(Fixed(1e-3))
+    with pytest.raises(TypeError, match="policy must be a Policy"):
+        PolicyObjective(stepper, object(), reward, x0, horizon)
+    with pytest.raises(TypeError, match="reward must be a Reward"):
+        PolicyObjective(stepper, LinearPolicy(NX, NU), object(), x0, horizon)
