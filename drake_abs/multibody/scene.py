@@ -134,9 +134,36 @@ class Scene:
         for c in self.contacts:
             if not c.points:
                 raise ValueError(f"scene {self.name!r}: contact on {c.body!r} lists no points")
-            if c.radius < 0 or (c.friction is not None and c.friction < 0):
-                raise ValueError(f"scene {self.name!r}: contact on {c.body!r}: radius and "
-                                 "friction must be >= 0")  # fmt: skip
+            for p in c.points:
+                if len(p) != 3 or not np.all(np.isfinite(np.asarray(p, float))):
+                    raise ValueError(
+                        f"scene {self.name!r}: contact on {c.body!r}: every point must be 3 "
+                        f"finite coordinates [x, y, z] in m; got {list(p)}"
+                    )
+            if not (np.isfinite(c.radius) and c.radius >= 0):
+                raise ValueError(f"scene {self.name!r}: contact on {c.body!r}: radius must be a "
+                                 f"finite number >= 0 (m); got {c.radius!r}")  # fmt: skip
+            if c.friction is not None and not (np.isfinite(c.friction) and c.friction >= 0):
+                raise ValueError(f"scene {self.name!r}: contact on {c.body!r}: friction must be "
+                                 f"a finite number >= 0 or null; got {c.friction!r}")  # fmt: skip
+        if not np.isfinite(self.ground_height):
+            raise ValueError(
+                f"scene {self.name!r}: ground_height must be finite (m); got {self.ground_height}"
+            )
+        n = np.asarray(self.ground_normal, float)
+        if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-12:
+            raise ValueError(
+                f"scene {self.name!r}: ground_normal must be 3 finite numbers, not all zero; "
+                f"got {list(self.ground_normal)}"
+            )
+        unknown = set(self.initial_state) - {"q", "v"}
+        if unknown:
+            raise ValueError(
+                f"scene {self.name!r}: initial_state may set q and v only; got {sorted(unknown)}"
+            )
+        for key, values in self.initial_state.items():
+            if not np.all(np.isfinite(np.asarray(values, float))):
+                raise ValueError(f"scene {self.name!r}: initial_state {key} must be finite")
         self.smoothing_policy()  # validates the smoothing parameters now, not at the first step
 
     def smoothing_policy(self) -> SmoothingPolicy:
@@ -168,14 +195,30 @@ class Scene:
         unknown = set(data) - set(cls.__dataclass_fields__)
         if unknown:
             raise ValueError(f"unknown scene keys {sorted(unknown)}")
+        for kind, spec in (("models", ModelSpec), ("contacts", ContactSpec)):
+            for i, entry in enumerate(data.get(kind, ())):
+                if not isinstance(entry, dict):
+                    raise ValueError(f"{kind}[{i}] must be a mapping; got {entry!r}")
+                bad = set(entry) - set(spec.__dataclass_fields__)
+                if bad:
+                    raise ValueError(
+                        f"unknown keys {sorted(bad)} in {kind}[{i}]; expected some of "
+                        f"{sorted(spec.__dataclass_fields__)}"
+                    )
         models = tuple(
             ModelSpec(**{**m, "actuate": tuple(m.get("actuate", ()))})
             for m in data.pop("models", ())
         )
-        contacts = tuple(
-            ContactSpec(**{**c, "points": tuple(tuple(map(float, p)) for p in c["points"])})
-            for c in data.pop("contacts", ())
-        )
+        contacts = []
+        for i, c in enumerate(data.pop("contacts", ())):
+            try:
+                points = tuple(tuple(map(float, p)) for p in c["points"])
+            except (KeyError, TypeError, ValueError) as err:
+                raise ValueError(
+                    f"contacts[{i}].points must be a list of [x, y, z] numbers (m): {err}"
+                ) from err
+            contacts.append(ContactSpec(**{**c, "points": points}))
+        contacts = tuple(contacts)
         if "ground_normal" in data:
             data["ground_normal"] = tuple(float(x) for x in data["ground_normal"])
         for key in ("time_step", "ground_height", "activation_distance"):

@@ -3,6 +3,7 @@ declared contacts, pruning far ones), and its AutoDiffXd gradient."""
 
 import numpy as np
 import pytest
+import yaml
 from numdiff import central_difference
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.analysis import Simulator, Simulator_
@@ -152,3 +153,25 @@ def test_free_flight_step_has_the_free_jacobian():
 
     fd = central_difference(step, np.concatenate([x, [1.0]]), eps=1e-6)
     np.testing.assert_allclose(np.concatenate([r.dx_dx[0], r.dx_du[0]], axis=1), fd, atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda d: d["contacts"][0].update(radius=float("nan")), "radius must be a finite"),
+        (lambda d: d["contacts"][0].update(points=[[0.0, float("nan"), 0.0]]), "3 finite"),
+        (lambda d: d["contacts"][0].update(points=[[0.0, 0.1]]), "3 finite"),
+        (lambda d: d["contacts"][0].update(points=[["a", 0, 0]]), r"contacts\[0\].points"),
+        (lambda d: d["contacts"][0].update(frction=0.5), r"unknown keys \['frction'\]"),
+        (lambda d: d["contacts"][0].update(friction=float("inf")), "friction must be"),
+        (lambda d: d.update(ground_height=float("nan")), "ground_height must be finite"),
+        (lambda d: d.update(ground_normal=[0, 0, 0]), "ground_normal"),
+        (lambda d: d.update(initial_state={"qq": [0, 0, 0]}), "q and v only"),
+        (lambda d: d["models"][0].update(weld_to="x"), r"models\[0\]"),
+    ],
+)
+def test_hostile_scene_files_are_refused_naming_the_key(change, match):
+    data = yaml.safe_load((PACKAGE_DIR / "scenes" / "box_push.yaml").read_text())
+    change(data)
+    with pytest.raises(ValueError, match=match):
+        Scene.from_dict(data)
