@@ -31,9 +31,46 @@ import sys
 if "numpy" not in sys.modules:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from drake_abs import contact, lcp
-from drake_abs.contact import *  # noqa: F403  (the names of contact.__all__)
-from drake_abs.lcp import *  # noqa: F403  (the names of lcp.__all__)
+from drake_abs.contact import (
+    LCS,
+    ContactAware,
+    Exact,
+    Fixed,
+    GaussianMatched,
+    Rollout,
+    SmoothingPolicy,
+    StepResult,
+    rollout,
+)
+from drake_abs.lcp import (
+    LCPConvergenceError,
+    LCPConvergenceWarning,
+    LCPRegularizationWarning,
+    LCPResult,
+    LCPStatus,
+    MatrixClass,
+    softened_lcp_1d,
+    solve_lcp,
+)
 from drake_abs.tasks.point_mass import point_mass_lcs
 
-__all__ = [*lcp.__all__, *contact.__all__, "point_mass_lcs"]
+__all__ = [
+    "LCS",
+    "ContactAware",
+    "Exact",
+    "Fixed",
+    "GaussianMatched",
+    "LCPConvergenceError",
+    "LCPConvergenceWarning",
+    "LCPRegularizationWarning",
+    "LCPResult",
+    "LCPStatus",
+    "MatrixClass",
+    "Rollout",
+    "SmoothingPolicy",
+    "StepResult",
+    "point_mass_lcs",
+    "rollout",
+    "softened_lcp_1d",
+    "solve_lcp",
+]

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 
+from drake_abs.contact.unconverged import apply_unconverged_policy
+
 
 def is_autodiff(arr: np.ndarray) -> bool:
     """True for an object array of AutoDiffXd (as Drake hands state and ports under AutoDiffXd)."""
@@ -50,8 +52,6 @@ def guarded_jacobians(converged, on_unconverged: str, *jacobians: np.ndarray) ->
     :mod:`drake_abs.contact.unconverged`): unchanged when every solve ``converged``; NaN under
     ``"drop"`` (the derivatives a Drake system passes on are then visibly unusable), unchanged
     under ``"flag"`` (both warn), an exception under ``"raise"``."""
-    from drake_abs.contact.unconverged import apply_unconverged_policy
-
     used = apply_unconverged_policy(np.atleast_1d(converged).reshape(1, -1), on_unconverged)
     if used[0]:
         return list(jacobians)

@@ -140,3 +140,13 @@ def test_tests_mirror_the_layout():
     folders.discard("__pycache__")
     layers = {name.rsplit("/", 1)[-1] for name in LAYERS} | {"experiments"}
     assert folders <= layers, folders - layers
+
+
+def test_the_top_level_re_exports_exactly_its_subpackages_names():
+    import drake_abs
+    import drake_abs.contact
+    import drake_abs.lcp
+
+    want = {*drake_abs.lcp.__all__, *drake_abs.contact.__all__, "point_mass_lcs"}
+    assert set(drake_abs.__all__) == want
+    assert all(hasattr(drake_abs, name) for name in want)

@@ -44,7 +44,7 @@ respect to q, v and u come from the caller (e.g. Drake AutoDiffXd).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
@@ -327,17 +327,7 @@ def contact_step(
             f"and Jt {quant.Jt.shape[1]} rows; the cone expects {nc} and {nt}"
         )
     if nc == 0:
-        r = _free_step(quant, h)
-        if parameters is None:
-            return r
-        T = parameters.dphi.shape[-1]
-        B, nx = r.dx_dx.shape[:2]
-        dv = np.zeros((B, nx - quant.q.shape[1], T))
-        if parameters.dv_free is not None:  # free flight: only the free velocity moves
-            dv = parameters.dv_free
-        dq = h * np.einsum("bqn,bnt->bqt", quant.N, dv)
-        dx = np.concatenate([dq, dv], axis=1)
-        return replace(r, dx_dtheta=dx, dlam_dtheta=np.zeros((B, 0, T)))
+        return _free_step(quant, h, parameters)
     F, z, S = assemble_lcp(quant, cone, h)
     Fnn = F[:, :nc, :nc]
     mu_n = smoothing.mu(z[:, :nc], Fnn)
@@ -361,12 +351,8 @@ def contact_step(
     out = dict(dx_dx=None, dx_du=None, dlam_dx=None, dlam_du=None)
     if jac:
         out = _step_jacobians(
-            quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient
+            quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, gradient, parameters
         )
-        if parameters is not None:
-            out["dx_dtheta"], out["dlam_dtheta"] = _parameter_jacobians(
-                quant, cone, h, F, z, G, lam, lcp, smoothing, gradient, parameters
-            )
     return ContactStepResult(
         q_next=q_next,
         v_next=v_next,
@@ -404,8 +390,11 @@ def _integrate(q, W, v_free, G, N, lam_v, h):
     return f, v_next, q_next
 
 
-def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
-    """No active contact: v+ = v_free, q+ = q + h N v+ (no LCP is solved)."""
+def _free_step(
+    quant: StepQuantities, h: float, par: ParameterDerivatives | None = None
+) -> ContactStepResult:
+    """No active contact: v+ = v_free, q+ = q + h N v+ (no LCP is solved). With ``par``, the
+    theta columns ride along (only the free velocity can depend on them here)."""
     B, nq = quant.q.shape
     v_next = quant.v_free.copy()
     q_next = quant.q + h * np.einsum("bqn,bn->bq", quant.N, v_next)
@@ -414,19 +403,24 @@ def _free_step(quant: StepQuantities, h: float) -> ContactStepResult:
     if quant.has_derivatives:
         P = quant.dv_free.shape[-1]
         nx = nq + quant.v.shape[1]
-        dq = np.zeros((B, nq, P))
+        dv, dN = quant.dv_free, quant.dN
+        if par is not None:  # theta columns after p: dN does not depend on theta
+            T = par.dphi.shape[-1]
+            dv_t = np.zeros((B, nx - nq, T)) if par.dv_free is None else par.dv_free
+            dv = np.concatenate([dv, dv_t], axis=-1)
+            dN = np.concatenate([dN, np.zeros(dN.shape[:-1] + (T,))], axis=-1)
+        dq = np.zeros((B, nq, dv.shape[-1]))
         dq[:, :, :nq] = np.eye(nq)
-        dq += h * (
-            np.einsum("bqnp,bn->bqp", quant.dN, v_next)
-            + np.einsum("bqn,bnp->bqp", quant.N, quant.dv_free)
-        )
-        dx = np.concatenate([dq, quant.dv_free], axis=1)
+        dq += h * (np.einsum("bqnp,bn->bqp", dN, v_next) + np.einsum("bqn,bnp->bqp", quant.N, dv))
+        dx = np.concatenate([dq, dv], axis=1)
         jac = dict(
             dx_dx=dx[:, :, :nx],
-            dx_du=dx[:, :, nx:],
+            dx_du=dx[:, :, nx:P],
             dlam_dx=np.zeros((B, 0, nx)),
             dlam_du=np.zeros((B, 0, P - nx)),
         )
+        if par is not None:
+            jac.update(dx_dtheta=dx[:, :, P:], dlam_dtheta=np.zeros((B, 0, dx.shape[-1] - P)))
     return ContactStepResult(q_next, v_next, empty, empty, np.ones(B, dtype=bool), lcp=None, **jac)
 
 
@@ -439,42 +433,58 @@ def expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:
     return rows
 
 
-def _step_jacobians(quant, cone, h, F, z, S, G, lam_v, f, v_next, lcp, smoothing, gradient):
-    """The chain rule of the module docstring: dx+/d(x, u) and dlam/d(x, u)."""
+def _step_jacobians(quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, gradient, par):
+    """The chain rule of the module docstring: dx+/d(x, u) and dlam/d(x, u); with ``par``, the
+    theta columns (:func:`_parameter_blocks`) appended to the same chain, giving dx+/dtheta and
+    dlam/dtheta."""
     nc, nt, nf = cone.sizes()
     B, nq = quant.q.shape
     nv = quant.v.shape[1]
+    P = quant.dv_free.shape[-1]
+    lam_v = lam[:, : nc + nt]
     dG = np.concatenate([quant.dJn, quant.dJt], axis=1)  # (B, nc + nt, nv, P)
     inner, dz_eff = _chain_in(
         quant.W, G, dG, lam_v, v_next, S, quant.dphi, quant.dv_free, quant.dW_dot(f), z.shape[1]
     )
-    dlam = lcp.dlam_dq @ dz_eff  # (B, d, P)
+    dN = quant.dN
     if gradient == "total":
         # dz_n/dp: the distance and free-velocity part (mu's dependence on F is held)
         dzn = quant.dphi + h * (
             np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
             + np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
         )
+    if par is not None:  # theta columns after p
+        inner_t, dz_t, dzn_t = _parameter_blocks(quant, cone, h, S, G, lam, f, par)
+        inner = np.concatenate([inner, inner_t], axis=-1)
+        dz_eff = np.concatenate([dz_eff, dz_t], axis=-1)
+        dN = np.concatenate([dN, np.zeros(dN.shape[:-1] + (dz_t.shape[-1],))], axis=-1)
+        if gradient == "total":
+            dzn = np.concatenate([dzn, dzn_t], axis=-1)
+    dlam = lcp.dlam_dq @ dz_eff  # (B, d, P [+ T])
+    if gradient == "total":
         dmu_rows = expand_mu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
         dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
-    dx = _chain_out(inner, quant.W, G, dlam, quant.N, quant.dN, v_next, h)  # (B, nq + nv, P)
+    dx = _chain_out(inner, quant.W, G, dlam, quant.N, dN, v_next, h)  # (B, nq + nv, P [+ T])
     nx = nq + nv
-    return dict(
-        dx_dx=dx[:, :, :nx], dx_du=dx[:, :, nx:], dlam_dx=dlam[:, :, :nx], dlam_du=dlam[:, :, nx:]
+    out = dict(
+        dx_dx=dx[:, :, :nx], dx_du=dx[:, :, nx:P], dlam_dx=dlam[:, :, :nx], dlam_du=dlam[:, :, nx:P]
     )
+    if par is not None:
+        out.update(dx_dtheta=dx[:, :, P:], dlam_dtheta=dlam[:, :, P:])
+    return out
 
 
-def _parameter_jacobians(quant, cone, h, F, z, G, lam, lcp, smoothing, gradient, par):
-    """``dx+/dtheta`` (B, nq + nv, T) and ``dlam/dtheta`` (B, d, T) at fixed (q, v, u).
+def _parameter_blocks(quant, cone, h, S, G, lam, f, par):
+    """The theta columns' inputs to the chain rule: ``inner`` (B, nv, T), the velocity change at
+    fixed impulses; ``dz`` (B, d, T), the LCP offsets' derivative with F's applied to lam; and
+    ``dzn`` (B, nc, T), the normal distances' derivative (for mu in the total mode).
 
-    theta moves the normal rows' offsets (``dz_n = dphi``), the cone rows' matrix entries
+    theta moves the normal rows' offsets (``dphi``), the cone rows' matrix entries
     (``F[cone f, gamma f] = alpha_f``, so ``(dF lam)_f = dalpha_f gamma_f``) and, through W and
-    v_free (masses), the velocity rows: ``S G (dv_free + dW f)`` with ``f = G^T lam``. Then, as
-    for (q, v, u), ``dlam = (dlam/dz)(dz + dF lam)`` plus, in the total mode, mu's dependence on
-    z_n (``dphi + h Jn dv_free``; F_nn held, as for p); ``dv+ = dv_free + dW f + W G^T dlam``
-    and ``dq+ = h N dv+`` (G and N do not depend on these parameters)."""
+    v_free (masses), the velocity rows: ``inner = dv_free + dW f`` with ``f = G^T lam``, entering
+    as ``S G inner``. G and N do not depend on these parameters."""
     nc, nt, nf = cone.sizes()
-    B, d = z.shape
+    B, d = lam.shape
     T = par.dphi.shape[-1]
     if par.dphi.shape != (B, nc, T) or par.dfriction.shape != (nf, T):
         raise ValueError(
@@ -482,29 +492,19 @@ def _parameter_jacobians(quant, cone, h, F, z, G, lam, lcp, smoothing, gradient,
             f"(nf, T) = ({nf}, T); got {par.dphi.shape} and {par.dfriction.shape}"
         )
     r = nc + nt
-    nv = quant.W.shape[-1]
-    dz = np.zeros((B, d, T))
-    dz[:, :nc] = par.dphi
-    dz[:, r:] = lam[:, cone.frictional, None] * par.dfriction[None]
-    inner = np.zeros((B, nv, T))  # dv_free + dW f: the velocity change at fixed impulses
+    inner = np.zeros((B, quant.W.shape[-1], T))
     if par.dv_free is not None:
         inner += par.dv_free
     if par.dW is not None:
-        f = np.einsum("bin,bi->bn", G, lam[:, :r])
         inner += np.einsum("bnmt,bm->bnt", par.dW, f)
-    S = np.ones(r)
-    S[:nc] = h
+    dz = np.zeros((B, d, T))
+    dz[:, :nc] = par.dphi
     dz[:, :r] += S[None, :, None] * np.einsum("bin,bnt->bit", G, inner)
-    dlam = lcp.dlam_dq @ dz
-    if gradient == "total":
-        dzn = par.dphi.copy()
-        if par.dv_free is not None:
-            dzn += h * np.einsum("bin,bnt->bit", quant.Jn, par.dv_free)
-        dmu_rows = expand_mu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
-        dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
-    dv = inner + np.einsum("bnm,bim,bit->bnt", quant.W, G, dlam[:, :r])
-    dq = h * np.einsum("bqn,bnt->bqt", quant.N, dv)
-    return np.concatenate([dq, dv], axis=1), dlam
+    dz[:, r:] = lam[:, cone.frictional, None] * par.dfriction[None]
+    dzn = par.dphi.copy()
+    if par.dv_free is not None:
+        dzn += h * np.einsum("bin,bnt->bit", quant.Jn, par.dv_free)
+    return inner, dz, dzn
 
 
 @nb.njit(cache=True)

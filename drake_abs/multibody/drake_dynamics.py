@@ -10,6 +10,7 @@ contacts a scene declares exist (and AutoDiffXd distance queries are not needed)
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -117,7 +118,7 @@ class ContactModelBase(ABC):
     def _setup(self) -> None:
         """Provider-specific set-up, after the shared attributes exist."""
 
-    @property
+    @functools.cached_property
     def massive_bodies(self) -> tuple[str, ...]:
         """Names of the plant's bodies with a positive mass (the mass parameters of
         :meth:`mass_derivatives`; massless helper bodies, such as a floating base's chain, are
@@ -130,6 +131,18 @@ class ContactModelBase(ABC):
                 out.append(body.name())
         return tuple(out)
 
+    @functools.cached_property
+    def _mass_seeded(self):
+        """An AutoDiffXd copy of the plant and a context whose body masses carry one derivative
+        each (the columns of :meth:`mass_derivatives`); built once."""
+        plant = self.plant.ToAutoDiffXd()
+        ctx = plant.CreateDefaultContext()
+        T = len(self.massive_bodies)
+        for k, name in enumerate(self.massive_bodies):
+            body = plant.GetBodyByName(name)
+            body.SetMass(ctx, AutoDiffXd(body.get_mass(ctx).value(), np.eye(T)[k]))
+        return plant, ctx
+
     def mass_derivatives(
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -138,16 +151,8 @@ class ContactModelBase(ABC):
         scaled with its centre of mass and unit inertia held, as ``RigidBody.SetMass`` does),
         at the states q (B, nq), v (B, nv) and inputs u (B, nu). Evaluated through an
         AutoDiffXd copy of the plant, whatever the provider; contacts do not depend on mass."""
-        names = self.massive_bodies
-        T = len(names)
-        if not hasattr(self, "_mass_plant"):
-            self._mass_plant = self.plant.ToAutoDiffXd()
-        plant = self._mass_plant
-        ctx = plant.CreateDefaultContext()
-        for k, name in enumerate(names):
-            body = plant.GetBodyByName(name)
-            m = body.get_mass(ctx).value()
-            body.SetMass(ctx, AutoDiffXd(m, np.eye(T)[k]))
+        plant, ctx = self._mass_seeded
+        T = len(self.massive_bodies)
         B, nv = v.shape
         dW = np.zeros((B, nv, nv, T))
         dv_free = np.zeros((B, nv, T))

@@ -100,14 +100,12 @@ class ComplementarityStepper:
         in column order: ``"ground_height"`` (m), ``"friction[i]"`` for every frictional contact
         candidate i (its Coulomb coefficient), then ``"mass[body]"`` (kg) for every body with a
         mass (its centre of mass and unit inertia held)."""
-        if not hasattr(self, "_parameter_names"):
-            coeff = self.model.cone_for(np.arange(self.sizes[3])).coefficients
-            self._parameter_names = (
-                ("ground_height",)
-                + tuple(f"friction[{i}]" for i in np.flatnonzero(~np.isnan(coeff)))
-                + tuple(f"mass[{name}]" for name in self.model.massive_bodies)
-            )
-        return self._parameter_names
+        coeff = self.model.cone.coefficients
+        return (
+            ("ground_height",)
+            + tuple(f"friction[{i}]" for i in np.flatnonzero(~np.isnan(coeff)))
+            + tuple(f"mass[{name}]" for name in self.model.massive_bodies)
+        )
 
     def _parameter_derivatives(self, idx, cone, q, v, u) -> ParameterDerivatives:
         """The theta block of one group's quantities (states q, v, u): every contact's distance
@@ -199,9 +197,9 @@ class ComplementarityStepper:
                 )
             self._scatter(out, rows, idx, cone, r, jacobians)
         finite = np.isfinite(out["x_next"]).all(axis=1)
-        if jacobians:
-            finite &= np.isfinite(out["dx_dx"]).all(axis=(1, 2))
-            finite &= np.isfinite(out["dx_du"]).all(axis=(1, 2))
+        for key in ("dx_dx", "dx_du", "dx_dtheta") if jacobians else ():
+            if key in out:
+                finite &= np.isfinite(out[key]).all(axis=(1, 2))
         if not finite.all():  # the dynamics overflowed (not the LCP): flag, never pass as valid
             out["converged"] &= finite
             warnings.warn(

@@ -75,7 +75,8 @@ class PolicyRollout:
 
     Attributes:
         x: (M, H + 1, nx) states; u: (M, H, nu) inputs applied (policy plus noise).
-        returns: (M,) sum of stage rewards plus the terminal reward, per rollout.
+        returns: (M,) sum of stage rewards plus the terminal reward, per rollout (NaN for a
+            dropped rollout).
         converged: (M, H) the step solver's flags (a rollout with a False is not exact).
         used: (M,) the rollouts estimators may use: all of them under ``on_unconverged="flag"``,
             those whose every step converged under ``"drop"``.
@@ -170,6 +171,7 @@ def rollout_policy(
     returns += rT
     used = apply_unconverged_policy(conv, on_unconverged)
     _check_finite(returns[used], "return")
+    returns[~used] = np.nan  # a dropped rollout's states are not the model's either
     if not gradient:
         return PolicyRollout(xs, us, returns, conv, used)
     g_x = drT

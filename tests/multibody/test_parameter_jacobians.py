@@ -126,3 +126,25 @@ def test_parameter_jacobians_in_free_flight_are_zero_and_need_jacobians():
     with pytest.raises(ValueError, match="jacobians"):
         stepper.step(model.x0[None], np.zeros(model.contact_model.nu), jacobians=False,
                      parameters=True)  # fmt: skip
+
+
+@pytest.mark.parametrize(("name", "iz"), [("box_push", 1), ("ball_throw", 2)])
+@pytest.mark.parametrize("smoothing", [Exact(), ContactAware(1e-3, 0.02)], ids=["exact", "abs"])
+def test_parameter_jacobians_match_independent_identities(name, iz, smoothing):
+    """Independent of central differences, from the state Jacobians (themselves checked against
+    Drake AutoDiffXd and differences elsewhere): raising the flat ground by d is lowering the
+    body by d and shifting the result up by d, so dx+/dh = -dx+/dz + e_z; for the box (one
+    body, all its inertia scaled with the mass) a heavier box is a weaker push,
+    dx+/dm = -(dx+/du u) / m."""
+    model = build_scene_model(name)
+    stepper = model.stepper(smoothing=smoothing)
+    x, u = _states(name, model)
+    r = stepper.step(x[None], u, parameters=True)
+    want = -r.dx_dx[0][:, iz].copy()
+    want[iz] += 1.0
+    np.testing.assert_allclose(r.dx_dtheta[0][:, 0], want, rtol=1e-9, atol=1e-12)
+    if name == "box_push":
+        m = model.plant.GetBodyByName("box").default_mass()
+        np.testing.assert_allclose(
+            r.dx_dtheta[0][:, -1], -(r.dx_du[0] @ u) / m, rtol=1e-8, atol=1e-12
+        )

@@ -281,6 +281,7 @@ def test_dropped_rollouts_carry_nan_gradients_and_every_estimator_honours_the_ma
         r = obj.rollout(theta, obj.noise(np.random.default_rng(0), 4))
     assert r.dropped == 1 and not r.used[0] and r.used[1:].all()
     assert np.isnan(r.grad[0]).all() and np.isfinite(r.grad[1:]).all()
+    assert np.isnan(r.returns[0]) and np.isfinite(r.returns[1:]).all()
     with pytest.warns(UnconvergedStepWarning):
         for est in (
             zeroth_order(_objective(_Corrupting(inner, [0]), "drop"), theta, rng, 4),
