@@ -115,8 +115,7 @@ def bench_closed_loop(spec, theta, cost, steps: int) -> dict:
     mpc = QpMpc(spec, theta)
     x0 = np.zeros(12)
 
-    def plant(x, u, jacobians=False):
-        return qc.step(x, u, PRM, jacobians=jacobians)
+    plant = qc.QuadcopterStepper(PRM)
 
     t_value, base = timed(lambda: closed_loop(mpc, theta, x0, steps, plant, cost), 2)
     t_grad, res = timed(

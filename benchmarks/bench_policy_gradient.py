@@ -42,12 +42,12 @@ import numpy as np
 from drake_abs.contact.smoothing import ContactAware
 from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
+from drake_abs.engine import rollout
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody.scene import Scene
 from drake_abs.policy.estimators import PolicyObjective, first_order
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
-from drake_abs.policy.rollout import rollout_policy
 from drake_abs.tasks.box_lcs import TranslatingBox
 
 M, H = 256, 200
@@ -131,7 +131,7 @@ def main(argv=None) -> int:
     drake = per_rollout * M
     ratio = drake / ours
 
-    ours_check = rollout_policy(obj.stepper, policy, theta, x0, noise[:n], reward, sigma=SIGMA)
+    ours_check = rollout(obj.stepper, policy, theta, x0, noise[:n], reward, sigma=SIGMA)
     g_ours, g_drake = ours_check.grad, np.array(drake_grads)
     rel = np.linalg.norm(g_ours - g_drake, axis=1) / np.linalg.norm(g_drake, axis=1)
     sign = np.mean(np.sign(g_ours) == np.sign(g_drake), axis=1)

@@ -5,8 +5,10 @@ this list (``docs/architecture.md``; ``tests/test_layers.py`` holds the table):
 
 - :mod:`drake_abs.lcp`: the softened LCP, its interior-point solver and Jacobians;
 - :mod:`drake_abs.contact`: smoothing policies, linear complementarity systems, the rigid-body
-  time-stepping LCP;
-- :mod:`drake_abs.policy`: policies, rewards, batched closed-loop rollouts, gradient estimators;
+  time-stepping LCP, the one step record;
+- :mod:`drake_abs.engine`: the one closed-loop engine (stepper, policy and reward protocols,
+  batched rollouts and their reverse pass);
+- :mod:`drake_abs.policy`: policies, rewards, gradient estimators, training;
 - :mod:`drake_abs.tasks`: the point mass, the translating box, the quadcopter;
 - :mod:`drake_abs.mpc`: differentiable QP-MPC and gray-box tuning;
 - :mod:`drake_abs.multibody`: scenes, MultibodyPlant/pinocchio dynamics, the batched rigid-body
@@ -37,10 +39,23 @@ from drake_abs.contact import (
     Exact,
     Fixed,
     GaussianMatched,
-    Rollout,
+    LcsStepper,
     SmoothingPolicy,
-    StepResult,
+    Step,
+)
+from drake_abs.engine import (
+    Adjoints,
+    LinearStepper,
+    ModelJacobians,
+    Policy,
+    PullbackPolicy,
+    Reward,
+    Stepper,
+    Trajectory,
+    open_loop,
+    reverse_pass,
     rollout,
+    rollout_memory_bytes,
 )
 from drake_abs.lcp import (
     LCPConvergenceError,
@@ -56,6 +71,19 @@ from drake_abs.tasks.point_mass import point_mass_lcs
 
 __all__ = [
     "LCS",
+    "Adjoints",
+    "LcsStepper",
+    "LinearStepper",
+    "ModelJacobians",
+    "Policy",
+    "PullbackPolicy",
+    "Reward",
+    "Step",
+    "Stepper",
+    "Trajectory",
+    "open_loop",
+    "reverse_pass",
+    "rollout_memory_bytes",
     "ContactAware",
     "Exact",
     "Fixed",
@@ -66,9 +94,7 @@ __all__ = [
     "LCPResult",
     "LCPStatus",
     "MatrixClass",
-    "Rollout",
     "SmoothingPolicy",
-    "StepResult",
     "point_mass_lcs",
     "rollout",
     "softened_lcp_1d",

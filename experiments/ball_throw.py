@@ -30,14 +30,17 @@ import time
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
+from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.step import Step
+from drake_abs.engine import rollout
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective, first_order, zeroth_order
 from drake_abs.policy.rewards import QuadraticReward
-from drake_abs.policy.rollout import LcsStepper, rollout_policy
 from drake_abs.policy.training import Adam, train
 from drake_abs.tasks.box_lcs import TranslatingBox
 
@@ -109,16 +112,6 @@ class ThrowPolicy:
 
 
 @dataclass(frozen=True)
-class ThrowStep:
-    """One batched throw step (the fields :class:`~drake_abs.policy.rollout.Stepper` needs)."""
-
-    x_next: np.ndarray
-    converged: np.ndarray
-    dx_dx: np.ndarray | None
-    dx_du: np.ndarray | None
-
-
-@dataclass(frozen=True)
 class ThrowStepper:
     """Releases a held ball at angle u with ``speed`` (m/s), then steps the ball's LCS.
 
@@ -128,11 +121,19 @@ class ThrowStepper:
     ball: LcsStepper
     speed: float
 
-    def step(self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True) -> ThrowStep:
+    parameter_names: ClassVar[tuple[str, ...]] = ()
+
+    def step(
+        self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True, parameters: bool = False
+    ) -> Step:
+        if parameters:
+            raise ValueError("parameters=True: ThrowStepper names no model parameters")
         M = x.shape[0]
         held = x[:, 4] > 0.5
         x_next = np.zeros((M, 5))
         conv = np.ones(M, dtype=bool)
+        nc = self.ball.lcs.dims[2]
+        impulse, mu, iterations = np.zeros((M, nc)), np.zeros((M, nc)), np.zeros(M, np.int64)
         dx_dx = np.zeros((M, 5, 5)) if jacobians else None
         dx_du = np.zeros((M, 5, 1)) if jacobians else None
         a = u[held, 0]
@@ -144,13 +145,14 @@ class ThrowStepper:
             r = self.ball.step(x[free, :4], np.zeros((int(free.sum()), 1)), jacobians=jacobians)
             x_next[free, :4] = r.x_next
             conv[free] = r.converged
+            impulse[free], mu[free], iterations[free] = r.impulse, r.mu, r.iterations
             if jacobians:
                 dx_dx[free, :4, :4] = r.dx_dx
         if jacobians and held.any():
             dx_dx[held, 0, 0] = dx_dx[held, 1, 1] = 1.0
             dx_du[held, 2, 0] = -self.speed * np.sin(a)
             dx_du[held, 3, 0] = self.speed * np.cos(a)
-        return ThrowStep(x_next, conv, dx_dx, dx_du)
+        return Step(x_next, conv, iterations, impulse, mu, dx_dx=dx_dx, dx_du=dx_du)
 
 
 def ball(config: Config) -> TranslatingBox:
@@ -189,7 +191,7 @@ def true_return(config: Config, angles) -> tuple[np.ndarray, np.ndarray]:
     # one rollout per angle: the angle enters as the first step's (zero-policy) input noise
     noise = np.zeros((angles.size, config.horizon, 1))
     noise[:, 0, 0] = angles
-    r = rollout_policy(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
+    r = rollout(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
                        sigma=1.0, gradient=False)  # fmt: skip
     return r.returns, r.x[:, -1, 0]
 
@@ -202,7 +204,7 @@ def landscape(config: Config, angles: np.ndarray) -> dict:
         noise = np.zeros((angles.size, config.horizon, 1))
         noise[:, 0, 0] = angles
         x0 = np.tile(obj.x0, (angles.size, 1))
-        r = rollout_policy(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
+        r = rollout(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
                            sigma=1.0, gradient=True)  # fmt: skip
         # dJ/dtheta at theta = 0 with u_0 = angle: the angle's derivative of the return
         out[method] = {"p_final": r.x[:, -1, 0].tolist(), "dreturn_dangle": r.grad[:, 0].tolist()}

@@ -143,8 +143,8 @@ class Task:
         self.name = name
         if name == "hopping_ball":
             from drake_abs import point_mass_lcs
+            from drake_abs.contact.lcs import LcsStepper
             from drake_abs.experiments.gradient_variance import TIME_STEP, spring_theta
-            from drake_abs.policy.rollout import LcsStepper
 
             lcs = point_mass_lcs(2, time_step=TIME_STEP)
             self._stepper = lambda s: LcsStepper(lcs, s, "frozen")  # paper 000 Algorithm 1

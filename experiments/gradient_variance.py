@@ -35,12 +35,12 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs import point_mass_lcs
+from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
-from drake_abs.policy.rollout import LcsStepper
 
 
 @dataclass(frozen=True)

@@ -137,8 +137,9 @@ class _Problem:
     theta0: np.ndarray
     x0: np.ndarray
 
-    def plant(self, x, u, jacobians=False):
-        return qc.step(x, u, self.params, jacobians=jacobians)
+    @property
+    def plant(self) -> qc.QuadcopterStepper:
+        return qc.QuadcopterStepper(self.params)
 
     def controller(self) -> QpMpc:
         return QpMpc(self.spec, self.theta0)

@@ -34,12 +34,12 @@ def _lcp() -> None:
 
 
 def _lcs() -> None:
-    from drake_abs import ContactAware, point_mass_lcs, rollout
+    from drake_abs import ContactAware, LcsStepper, open_loop, point_mass_lcs
 
     lcs = point_mass_lcs(2, time_step=0.01)
     x0 = np.array([[0.0, 0.05, 1.0, -1.0]])
     for gradient in ("frozen", "total"):
-        rollout(lcs, x0, np.zeros((5, 2)), ContactAware(1e-2, 0.05), gradient=gradient)
+        open_loop(LcsStepper(lcs, ContactAware(1e-2, 0.05), gradient), x0, np.zeros((5, 2)))
 
 
 def _scenes() -> None:

@@ -39,9 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.rollout import rollout
+from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import Fixed
 from drake_abs.contact.unconverged import UnconvergedStepWarning
+from drake_abs.engine import open_loop
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.tasks.box_lcs import TranslatingBox
 from drake_abs.tasks.point_mass import point_mass_lcs
@@ -115,8 +116,8 @@ def impact_values(config: Config, heights: np.ndarray, smoothing=None) -> tuple:
     lcs = point_mass_lcs(1, time_step=config.impact_time_step)
     x0 = np.column_stack([heights, np.full(heights.size, -config.drop_speed)])
     u = np.zeros((config.impact_steps, 1))
-    ro = rollout(lcs, x0, u, smoothing)
-    return ro.x[:, -1, 1], ro.dxN_dx0[:, 1, 0], ro.converged.all(axis=1)
+    ro = open_loop(LcsStepper(lcs, smoothing), x0, u)
+    return ro.x[:, -1, 1], ro.dxH_dx0[:, 1, 0], ro.converged.all(axis=1)
 
 
 def impact_experiment(config: Config, rng: np.random.Generator) -> dict:
@@ -190,8 +191,8 @@ def push_gradients(config: Config, pushes: np.ndarray, contact=None) -> tuple:
     box = TranslatingBox(friction=config.friction, time_step=config.time_step)
     x0 = np.tile(box.resting_state(), (pushes.size, 1))
     u = np.repeat(pushes[:, None, None], config.push_steps, axis=1)
-    ro = rollout(box.lcs, x0, u, box.smoothing(contact))
-    return ro.x[:, -1, 0], ro.dxN_du[:, :, 0, 0].sum(axis=1), ro.converged.all(axis=1)
+    ro = open_loop(LcsStepper(box.lcs, box.smoothing(contact)), x0, u)
+    return ro.x[:, -1, 0], ro.dxH_du[:, :, 0, 0].sum(axis=1), ro.converged.all(axis=1)
 
 
 def friction_experiment(config: Config, rng: np.random.Generator) -> dict:

@@ -79,15 +79,16 @@ def ComplementarityPlant_(T):
             if autodiff.is_autodiff(x) or autodiff.is_autodiff(u):
                 (xv, uv), (gx, gu) = autodiff.split([x, u])
                 r = self.stepper.step(xv[None], uv[None], jacobians=True)
+                r = r.first()
                 J = autodiff.guarded_jacobians(
-                    r.converged, self.on_unconverged, r.dx_dx[0], r.dx_du[0], r.dn_dx[0], r.dn_du[0]
+                    r.converged, self.on_unconverged, r.dx_dx, r.dx_du, r.dimpulse_dx, r.dimpulse_du
                 )
-                x_next = autodiff.chain(r.x_next[0], J[0], J[1], gx, gu)
-                impulse = autodiff.chain(r.normal_impulse[0], J[2], J[3], gx, gu)
-                mu = autodiff.join(r.mu[0], np.zeros((r.mu.shape[1], gx.shape[1])))
+                x_next = autodiff.chain(r.x_next, J[0], J[1], gx, gu)
+                impulse = autodiff.chain(r.impulse, J[2], J[3], gx, gu)
+                mu = autodiff.join(r.mu, np.zeros((r.mu.shape[0], gx.shape[1])))
             else:
                 r = self.stepper.step(np.asarray(x)[None], np.asarray(u)[None], jacobians=False)
-                x_next, impulse, mu = r.x_next[0], r.normal_impulse[0], r.mu[0]
+                x_next, impulse, mu = r.x_next[0], r.impulse[0], r.mu[0]
             discrete_state.set_value(self._x, x_next)
             discrete_state.set_value(self._n, impulse)
             discrete_state.set_value(self._mu, mu)

@@ -110,14 +110,14 @@ def LcsPlant_(T):
                 r = step(xv, uv, self.smoothing, gradient=self.gradient, jacobians=True)
                 J = autodiff.guarded_jacobians(
                     r.converged, self.on_unconverged,
-                    r.dx_dx, r.dx_du, r.dlam_dx, r.dlam_du, r.dmu_dx, r.dmu_du,
+                    r.dx_dx, r.dx_du, r.dimpulse_dx, r.dimpulse_du, r.dmu_dx, r.dmu_du,
                 )  # fmt: skip
                 x_next = autodiff.chain(r.x_next, J[0], J[1], gx, gu)
-                lam = autodiff.chain(r.lam, J[2], J[3], gx, gu)
+                lam = autodiff.chain(r.impulse, J[2], J[3], gx, gu)
                 mu = autodiff.chain(r.mu, J[4], J[5], gx, gu)
             else:
                 r = step(x, u, self.smoothing, gradient=self.gradient, jacobians=False)
-                x_next, lam, mu = r.x_next, r.lam, r.mu
+                x_next, lam, mu = r.x_next, r.impulse, r.mu
             discrete_state.set_value(self._x, x_next)
             discrete_state.set_value(self._lam, lam)
             discrete_state.set_value(self._mu, mu)

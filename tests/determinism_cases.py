@@ -41,13 +41,13 @@ def lcp_batch() -> str:
 
 def lcs_rollout() -> str:
     """The point mass thrown at the ground under adaptive smoothing, with Jacobians."""
-    from drake_abs import ContactAware, point_mass_lcs, rollout
+    from drake_abs import ContactAware, LcsStepper, open_loop, point_mass_lcs
 
     lcs = point_mass_lcs(2, time_step=0.01)
     x0 = np.array([[0.0, 0.25, 1.0, 0.3], [0.1, 0.05, -0.5, -1.0]])
     u = np.tile([0.2, -1.0], (60, 1))
-    r = rollout(lcs, x0, u, ContactAware(1e-2, 0.05), gradient="total")
-    return _digest(r.x, r.lam, r.dxN_dx0)
+    r = open_loop(LcsStepper(lcs, ContactAware(1e-2, 0.05), "total"), x0, u)
+    return _digest(r.x, r.impulse, r.dxH_dx0)
 
 
 def scene_step() -> str:
@@ -84,10 +84,10 @@ def mpc_sequence() -> str:
 def policy_gradient() -> str:
     """A seeded first-order estimate on the bouncing point mass under adaptive smoothing."""
     from drake_abs import ContactAware, point_mass_lcs
+    from drake_abs.contact.lcs import LcsStepper
     from drake_abs.policy.estimators import PolicyObjective, first_order
     from drake_abs.policy.policies import LinearPolicy
     from drake_abs.policy.rewards import QuadraticReward
-    from drake_abs.policy.rollout import LcsStepper
 
     lcs = point_mass_lcs(2, time_step=0.02)
     reward = QuadraticReward(np.diag([0.0, 1.0, 0.0, 0.01]), 0.01 * np.eye(2), np.r_[1, 0.2, 0, 0])

@@ -16,17 +16,18 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
     "drake_abs/lcp": ("drake_abs.lcp", set(), set()),
     "drake_abs/contact": ("drake_abs.contact", {"drake_abs.lcp"}, set()),
+    "drake_abs/engine": ("drake_abs.engine", {"drake_abs.lcp", "drake_abs.contact"}, set()),
     "drake_abs/policy": (
         "drake_abs.policy",
-        {"drake_abs.lcp", "drake_abs.contact"},
+        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine"},
         {"tqdm"},
     ),
     "drake_abs/tasks": (
         "drake_abs.tasks",
-        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.policy"},
+        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine", "drake_abs.policy"},
         set(),
     ),
-    "drake_abs/mpc": ("drake_abs.mpc", set(), {"osqp"}),
+    "drake_abs/mpc": ("drake_abs.mpc", {"drake_abs.contact", "drake_abs.engine"}, {"osqp"}),
     "drake_abs/multibody": (
         "drake_abs.multibody",
         {"drake_abs.lcp", "drake_abs.contact"},
@@ -37,6 +38,7 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         {
             "drake_abs.lcp",
             "drake_abs.contact",
+            "drake_abs.engine",
             "drake_abs.policy",
             "drake_abs.tasks",
             "drake_abs.mpc",
@@ -49,6 +51,7 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         {
             "drake_abs.lcp",
             "drake_abs.contact",
+            "drake_abs.engine",
             "drake_abs.policy",
             "drake_abs.tasks",
             "drake_abs.mpc",
@@ -119,7 +122,8 @@ def test_core_top_level_holds_only_the_package_and_private_helpers():
 
 def test_the_drake_free_core_imports_without_pydrake():
     code = (
-        "import sys, drake_abs, drake_abs.lcp, drake_abs.contact, drake_abs.policy, "
+        "import sys, drake_abs, drake_abs.lcp, drake_abs.contact, drake_abs.engine, "
+        "drake_abs.policy, "
         "drake_abs.mpc, drake_abs.tasks; "
         "drake_abs.solve_lcp([[1.0]], [0.5]); "
         "bad = [m for m in sys.modules if m.startswith(('pydrake', 'pinocchio'))]; "
@@ -145,8 +149,14 @@ def test_tests_mirror_the_layout():
 def test_the_top_level_re_exports_exactly_its_subpackages_names():
     import drake_abs
     import drake_abs.contact
+    import drake_abs.engine
     import drake_abs.lcp
 
-    want = {*drake_abs.lcp.__all__, *drake_abs.contact.__all__, "point_mass_lcs"}
+    want = {
+        *drake_abs.lcp.__all__,
+        *drake_abs.contact.__all__,
+        *drake_abs.engine.__all__,
+        "point_mass_lcs",
+    }
     assert set(drake_abs.__all__) == want
     assert all(hasattr(drake_abs, name) for name in want)

@@ -1,13 +1,13 @@
 """Contact as a softened complementarity system: smoothing policies (how much mu per contact),
-the linear complementarity system (LCS) and its open-loop rollout, and the rigid-body
-time-stepping LCP assembled from a model's mass matrix and contact Jacobians.
+the linear complementarity system (LCS) and its stepper, the rigid-body time-stepping LCP
+assembled from a model's mass matrix and contact Jacobians, and the one step record (``Step``).
 
 Drake-free; builds on :mod:`drake_abs.lcp`.
 """
 
-from drake_abs.contact.lcs import LCS, StepResult
-from drake_abs.contact.rollout import Rollout, rollout
+from drake_abs.contact.lcs import LCS, LcsStepper
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.step import Step
 
 __all__ = [
     "LCS",
@@ -15,8 +15,7 @@ __all__ = [
     "Exact",
     "Fixed",
     "GaussianMatched",
-    "Rollout",
+    "LcsStepper",
     "SmoothingPolicy",
-    "StepResult",
-    "rollout",
+    "Step",
 ]

@@ -16,9 +16,9 @@ import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.step import Step
 from drake_abs.lcp.ipm import (
     SOLVER_DEFAULTS,
-    LCPResult,
     OnBadMatrix,
     apply_matrix_policy,
     check_solver_options,
@@ -35,35 +35,6 @@ def check_gradient_mode(gradient, name: str = "gradient") -> None:
     """Raise ``ValueError`` naming ``name`` unless ``gradient`` is ``"frozen"`` or ``"total"``."""
     if gradient not in ("frozen", "total"):
         raise ValueError(f"{name} must be 'frozen' or 'total'; got {gradient!r}")
-
-
-@dataclass(frozen=True)
-class StepResult:
-    """One batched LCS step. Shapes for a batch of B (no leading axis for a single state).
-
-    Attributes:
-        x_next: (B, dx) next state.
-        lam: (B, d) contact impulses.
-        mu: (B, d) central-path value reached per contact.
-        converged: (B,) solver convergence flags.
-        dx_dx, dx_du: (B, dx, dx), (B, dx, du) Jacobians of x_next (None if not requested).
-        dlam_dx, dlam_du: (B, d, dx), (B, d, du) Jacobians of lam (None if not requested).
-        dmu_dx, dmu_du: (B, d, dx), (B, d, du) Jacobians of the requested mu (zero in frozen
-            mode; None if not requested).
-        lcp: the solver's full result.
-    """
-
-    x_next: np.ndarray
-    lam: np.ndarray
-    mu: np.ndarray
-    converged: np.ndarray
-    dx_dx: np.ndarray | None
-    dx_du: np.ndarray | None
-    dlam_dx: np.ndarray | None
-    dlam_du: np.ndarray | None
-    dmu_dx: np.ndarray | None
-    dmu_du: np.ndarray | None
-    lcp: LCPResult
 
 
 @dataclass(frozen=True)
@@ -156,7 +127,7 @@ class LCS:
         gradient: GradientMode = "total",
         jacobians: bool = True,
         strict: bool = False,
-    ) -> StepResult:
+    ) -> Step:
         """Advance a batch of states one step.
 
         Args:
@@ -166,8 +137,11 @@ class LCS:
             gradient: ``"total"`` (default) also differentiates mu(z) through z: the derivative
                 of the step as computed. ``"frozen"`` treats mu as a constant (paper 000
                 Algorithm 1): biased wherever mu depends on the state.
-            jacobians: compute dx+/dx, dx+/du and the lam and mu Jacobians.
+            jacobians: compute dx+/dx, dx+/du and the impulse (lam) and mu Jacobians.
             strict: raise instead of warning when the LCP solve does not converge.
+
+        Returns:
+            a :class:`~drake_abs.contact.step.Step`; ``impulse`` is lam (B, d).
         """
         check_gradient_mode(gradient)
         smoothing = Exact() if smoothing is None else smoothing
@@ -185,7 +159,7 @@ class LCS:
             monotone=self._step_check == "trusted", **self.solver_options,
         )  # fmt: skip
         x_next = X @ self.A.T + U @ self.B.T + lcp.lam @ self.C.T + self.c
-        jac = [None] * 6
+        jac = {}
         if jacobians:
             dlam_dz = lcp.dlam_dq
             dmu_dz = smoothing.dmu_dz(z, self.F) if gradient == "total" else None
@@ -193,18 +167,56 @@ class LCS:
                 dlam_dz = dlam_dz + lcp.dlam_dmu @ dmu_dz
             dlam_dx = dlam_dz @ self.D
             dlam_du = dlam_dz @ self.E
-            dx_dx = self.A + self.C @ dlam_dx
-            dx_du = self.B + self.C @ dlam_du
+            jac = {
+                "dx_dx": self.A + self.C @ dlam_dx,
+                "dx_du": self.B + self.C @ dlam_du,
+                "dimpulse_dx": dlam_dx,
+                "dimpulse_du": dlam_du,
+            }
             if dmu_dz is None:
-                dmu_dx = np.zeros(dlam_dx.shape)
-                dmu_du = np.zeros(dlam_du.shape)
+                jac["dmu_dx"], jac["dmu_du"] = np.zeros(dlam_dx.shape), np.zeros(dlam_du.shape)
             else:
-                dmu_dx, dmu_du = dmu_dz @ self.D, dmu_dz @ self.E
-            jac = [dx_dx, dx_du, dlam_dx, dlam_du, dmu_dx, dmu_du]
-        out = StepResult(x_next, lcp.lam, lcp.mu, lcp.converged, *jac, lcp=lcp)
-        return _first(out) if single else out
+                jac["dmu_dx"], jac["dmu_du"] = dmu_dz @ self.D, dmu_dz @ self.E
+        out = Step(
+            x_next=x_next,
+            converged=lcp.converged,
+            iterations=lcp.iterations,
+            impulse=lcp.lam,
+            mu=lcp.mu,
+            lcp=lcp,
+            **jac,
+        )
+        return out.first() if single else out
 
 
-def _first(r: StepResult) -> StepResult:
-    fields = {k: (v if v is None or k == "lcp" else v[0]) for k, v in r.__dict__.items()}
-    return StepResult(**fields)
+@dataclass(frozen=True)
+class LcsStepper:
+    """An LCS with its smoothing policy and gradient mode: a batched stepper
+    (:class:`drake_abs.engine.Stepper`) for the closed-loop engine.
+
+    Args:
+        lcs: the system.
+        smoothing: the per-contact mu policy (default :class:`Exact`); larger mu is smoother.
+        gradient: ``"total"`` (default) or ``"frozen"`` (see :meth:`LCS.step`).
+    """
+
+    lcs: LCS
+    smoothing: SmoothingPolicy | None = None
+    gradient: GradientMode = "total"
+
+    def __post_init__(self):
+        check_gradient_mode(self.gradient)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """An LCS names no model parameters (its matrices are the model)."""
+        return ()
+
+    def step(self, x, u, *, jacobians: bool = True, parameters: bool = False) -> Step:
+        """``LCS.step`` with this stepper's smoothing and gradient mode."""
+        if parameters:
+            raise ValueError(
+                "parameters=True: an LcsStepper has no named model parameters "
+                "(use a scene's ComplementarityStepper)"
+            )
+        return self.lcs.step(x, u, self.smoothing, gradient=self.gradient, jacobians=jacobians)

@@ -8,12 +8,15 @@ Cost (eq. 7, section 7)::
                                                                           x_min,i - x_t,i)
     total     = C + P                                                    (w = 300 in the paper)
 
-Gradients, forward mode (eq. 8): J_{u_t} = J_MPC,x J_{x_t} + J_MPC,theta (8b),
-J_{x_{t+1}} = J_g,x J_{x_t} + J_g,u J_{u_t} (8a), and the chain rule through the cost (8c). J_g is
-either the identified linear model (A, B) (``gradient="model"``: the model-based estimate of
-section 4.2) or the true plant's own Jacobians along the trajectory (``gradient="exact"``: what
-tuning "with the exact model" uses). The penalty's conservative Jacobian takes the subgradient 0
-where a state sits exactly on its bound.
+Gradients (eq. 8): the closed loop runs in the one engine (:func:`drake_abs.engine.rollout`)
+with the MPC as its policy (:class:`drake_abs.mpc.policy.MpcPolicy`, eq. 8b: du0/dx, du0/dtheta
+of each solve) and the total cost as a negative reward (one sign convention: rewards are
+maximised; :meth:`TrackingCost.reward`). The engine's reverse pass gives the same derivative as
+the forward accumulation of eq. 8a-8c. J_g is either the identified linear model (A, B)
+(``gradient="model"``: the model-based estimate of section 4.2, through
+:class:`drake_abs.engine.ModelJacobians`) or the true plant's own Jacobians along the trajectory
+(``gradient="exact"``: what tuning "with the exact model" uses). The penalty's conservative
+Jacobian takes the subgradient 0 where a state sits exactly on its bound.
 
 Zeroth order (eq. 9): J_zo = (n_theta / delta) [total(theta + delta v) - total(theta)] v with v
 uniform on the unit sphere. Gray-box update (eq. 10): d_k = eta_k J_model + (1 - eta_k) J_zo,
@@ -39,43 +42,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal
 
 import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
+from drake_abs.contact.unconverged import UnconvergedPolicy
+from drake_abs.engine import ModelJacobians, Stepper, rollout
+from drake_abs.mpc.policy import MpcPolicy
 from drake_abs.mpc.qp_mpc import QpMpc
 
 GradientSource = Literal["model", "exact"]
-
-
-class PlantStep(Protocol):
-    """What a plant's step returns (e.g. :class:`drake_abs.tasks.quadcopter.QuadcopterStep`)."""
-
-    x_next: np.ndarray
-    dx_dx: np.ndarray | None
-    dx_du: np.ndarray | None
-
-
-Plant = Callable[..., PlantStep]  # plant(x (nx,), u (nu,), jacobians=bool) -> PlantStep
-
-
-@dataclass(frozen=True)
-class LinearPlant:
-    """x+ = A x + B u as a plant (for tests and the LQR check); ``__call__`` is the step."""
-
-    A: np.ndarray
-    B: np.ndarray
-
-    def __call__(self, x, u, jacobians: bool = False) -> PlantStep:
-        @dataclass(frozen=True)
-        class _Step:
-            x_next: np.ndarray
-            dx_dx: np.ndarray | None
-            dx_du: np.ndarray | None
-
-        x_next = self.A @ np.asarray(x, float) + self.B @ np.asarray(u, float)
-        return _Step(x_next, self.A if jacobians else None, self.B if jacobians else None)
 
 
 @dataclass(frozen=True)
@@ -134,6 +111,38 @@ class TrackingCost:
         g = np.where(above > 0, 1.0, 0.0) - np.where(below > 0, 1.0, 0.0)
         return float(np.sum(np.maximum(0.0, above)) + np.sum(np.maximum(0.0, below))), g
 
+    def reward(self) -> TrackingReward:
+        """This cost plus its penalty as a :class:`~drake_abs.engine.Reward`: the negative of
+        ``stage + w * violation`` per step and ``terminal + w * violation`` at the end."""
+        return TrackingReward(self)
+
+
+@dataclass(frozen=True)
+class TrackingReward:
+    """The reward form (maximised) of a :class:`TrackingCost`, batched over M rollouts:
+    r_t = -(||x_t - x_ref||_Q^2 + ||u_t - u_ref||_R^2 + w dist_1(x_t)),
+    r_T = -(||x_T - x_ref||_P^2 + w dist_1(x_T))."""
+
+    cost: TrackingCost
+
+    def stage(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        w, M = self.cost.penalty_weight, len(x)
+        r, dr_dx, dr_du = np.empty(M), np.empty(np.shape(x)), np.empty(np.shape(u))
+        for m in range(M):
+            c, gx, gu = self.cost.stage(x[m], u[m])
+            v, gv = self.cost.violation(x[m])
+            r[m], dr_dx[m], dr_du[m] = -(c + w * v), -(gx + w * gv), -gu
+        return r, dr_dx, dr_du
+
+    def terminal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        w, M = self.cost.penalty_weight, len(x)
+        r, dr_dx = np.empty(M), np.empty(np.shape(x))
+        for m in range(M):
+            c, gT = self.cost.terminal(x[m])
+            v, gv = self.cost.violation(x[m])
+            r[m], dr_dx[m] = -(c + w * v), -(gT + w * gv)
+        return r, dr_dx
+
 
 @dataclass(frozen=True)
 class ClosedLoopResult:
@@ -170,24 +179,30 @@ def closed_loop(
     theta,
     x0,
     steps: int,
-    plant: Plant,
+    plant: Stepper,
     cost: TrackingCost,
     *,
     gradient: GradientSource | None = None,
     model: tuple[np.ndarray, np.ndarray] | None = None,
+    on_unconverged: UnconvergedPolicy = "raise",
 ) -> ClosedLoopResult:
-    """Roll the MPC policy out on ``plant`` for ``steps`` steps from ``x0`` and evaluate the cost.
+    """Roll the MPC policy out on ``plant`` for ``steps`` steps from ``x0`` and evaluate the cost,
+    in the closed-loop engine.
 
     Args:
         controller: the MPC (its theta is set to ``theta``).
         theta: (n_theta,) cost parameters.
         x0: (nx,) initial state.
         steps: T >= 1.
-        plant: ``plant(x, u, jacobians=bool)`` -> object with x_next (and dx_dx, dx_du).
+        plant: a batched stepper (:class:`~drake_abs.engine.Stepper`, e.g.
+            ``QuadcopterStepper`` or ``LinearStepper``).
         cost: the upper-level cost.
         gradient: None, "model" (J_g = ``model``) or "exact" (J_g = the plant's Jacobians).
         model: (A, B) of the prediction model, required for ``gradient="model"``; the
             controller's own (A, B) by default.
+        on_unconverged: a plant step whose contact solve did not converge: ``"raise"``
+            (default: one closed loop has nothing to average over), ``"drop"`` (NaN result,
+            warned) or ``"flag"``.
 
     A fallback control (QP not solved) enters the gradient with zero Jacobians (it is a
     constant); the steps are counted in ``fallback``.
@@ -200,48 +215,29 @@ def closed_loop(
         raise ValueError(f"steps must be an integer >= 1; got {steps!r}")
     if gradient not in (None, "model", "exact"):
         raise ValueError(f"gradient must be None, 'model' or 'exact'; got {gradient!r}")
+    stepper = plant
     if gradient == "model":
         Ag, Bg = model if model is not None else (spec.A, spec.B)
         Ag = as_finite_array(Ag, "model A", ndim=(2,))
         Bg = as_finite_array(Bg, "model B", ndim=(2,))
+        stepper = ModelJacobians(plant, Ag, Bg)
     controller.set_theta(theta)
-    T, nx, nu, nth = int(steps), spec.nx, spec.nu, controller.n_theta
-    xs = np.empty((T + 1, nx))
-    us = np.empty((T, nu))
-    status = np.empty(T, dtype=np.int8)
-    fallback = np.zeros(T, dtype=bool)
-    xs[0] = x0
-    want = gradient is not None
-    Jx = np.zeros((nx, nth))
-    grad = np.zeros(nth)
-    C = viol = 0.0
-    w = cost.penalty_weight
-    for t in range(T):
-        x = xs[t]
-        sol = controller.solve(x, jacobians=want)
-        u = sol.u0
-        us[t], status[t], fallback[t] = u, int(sol.status), sol.fallback
-        stage, gx, gu = cost.stage(x, u)
-        v, gv = cost.violation(x)
-        C += stage
-        viol += v
-        step = plant(x, u, jacobians=(gradient == "exact"))
-        xs[t + 1] = step.x_next
-        if want:
-            Ju = sol.du0_dx @ Jx + sol.du0_dtheta  # (8b)
-            grad += (gx + w * gv) @ Jx + gu @ Ju  # (8c), stage and penalty at t
-            if gradient == "exact":
-                Jx = step.dx_dx @ Jx + step.dx_du @ Ju  # (8a) with the true Jacobians
-            else:
-                Jx = Ag @ Jx + Bg @ Ju  # (8a) with the model
-    term, gT = cost.terminal(xs[T])
-    v, gv = cost.violation(xs[T])
-    C += term
-    viol += v
-    if want:
-        grad += (gT + w * gv) @ Jx
+    policy = MpcPolicy(controller)
+    T, nu = int(steps), spec.nu
+    traj = rollout(
+        stepper, policy, theta, x0, np.zeros((1, T, nu)), cost.reward(), sigma=0.0,
+        gradient=gradient is not None, on_unconverged=on_unconverged,
+    )  # fmt: skip
+    xs, us = traj.x[0], traj.u[0]
     if not np.all(np.isfinite(xs)):
         raise FloatingPointError("the closed loop produced a non-finite state")
+    C = viol = 0.0
+    for t in range(T):
+        C += cost.stage(xs[t], us[t])[0]
+        viol += cost.violation(xs[t])[0]
+    C += cost.terminal(xs[T])[0]
+    viol += cost.violation(xs[T])[0]
+    w = cost.penalty_weight
     return ClosedLoopResult(
         x=xs,
         u=us,
@@ -249,9 +245,9 @@ def closed_loop(
         violation=viol,
         penalty=w * viol,
         total=C + w * viol,
-        status=status,
-        fallback=fallback,
-        gradient=grad if want else None,
+        status=np.array([int(s.status) for s in policy.solutions], dtype=np.int8),
+        fallback=np.array([s.fallback for s in policy.solutions], dtype=bool),
+        gradient=-traj.grad[0] if gradient is not None else None,
         gradient_source=gradient,
     )
 

@@ -6,18 +6,13 @@ Start from ``make_stepper("box_push")`` or ``build_scene_model(Scene.load("box_p
 
 from drake_abs.multibody.builder import PACKAGE_DIR, SceneModel, build_scene_model, make_stepper
 from drake_abs.multibody.scene import ContactSpec, ModelSpec, Scene, shipped_scenes
-from drake_abs.multibody.stepper import (
-    ComplementarityStepper,
-    RigidStepResult,
-    StepOverflowWarning,
-)
+from drake_abs.multibody.stepper import ComplementarityStepper, StepOverflowWarning
 
 __all__ = [
     "PACKAGE_DIR",
     "ComplementarityStepper",
     "ContactSpec",
     "ModelSpec",
-    "RigidStepResult",
     "Scene",
     "SceneModel",
     "StepOverflowWarning",

@@ -11,54 +11,19 @@ applies every setting the scene names.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
 from drake_abs.contact.contact_lcp import ParameterDerivatives, contact_step
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.step import Step
 from drake_abs.multibody.drake_dynamics import ContactModelBase
 
 
 class StepOverflowWarning(UserWarning):
     """A step from a finite state gave a non-finite next state or Jacobian (e.g. explicit
     Coriolis terms at very large joint velocities); its ``converged`` flag is False."""
-
-
-@dataclass(frozen=True)
-class RigidStepResult:
-    """One batched step of a complementarity plant (B states, nc contact candidates).
-
-    Attributes:
-        x_next: (B, nq + nv).
-        normal_impulse: (B, nc) normal impulse of every candidate (N s; 0 when left out).
-        friction_impulse: (B, nc, 3) tangential impulse in the world frame (N s).
-        mu: (B, nc) central-path value reached per contact (0 when left out).
-        active: (B, nc) which candidates were in the step's LCP.
-        converged: (B,) solver flags.
-        iterations: (B,) interior-point iterations (0 without an LCP).
-        dx_dx, dx_du: (B, nx, nx), (B, nx, nu); dn_dx, dn_du: (B, nc, nx), (B, nc, nu) for the
-            normal impulses (None unless Jacobians were asked for).
-        dx_dtheta, dn_dtheta: (B, nx, T), (B, nc, T): derivatives with respect to the model
-            parameters named by ``theta_names`` (None unless asked for with
-            ``parameters=True``). A block of its own: never part of dx_du.
-    """
-
-    x_next: np.ndarray
-    normal_impulse: np.ndarray
-    friction_impulse: np.ndarray
-    mu: np.ndarray
-    active: np.ndarray
-    converged: np.ndarray
-    iterations: np.ndarray
-    dx_dx: np.ndarray | None = None
-    dx_du: np.ndarray | None = None
-    dn_dx: np.ndarray | None = None
-    dn_du: np.ndarray | None = None
-    dx_dtheta: np.ndarray | None = None
-    dn_dtheta: np.ndarray | None = None
-    theta_names: tuple[str, ...] = ()
 
 
 class ComplementarityStepper:
@@ -128,9 +93,15 @@ class ComplementarityStepper:
 
     def step(
         self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True, parameters: bool = False
-    ) -> RigidStepResult:
+    ) -> Step:
         """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared. With ``parameters`` (and
-        ``jacobians``), also the derivatives with respect to :attr:`parameter_names`."""
+        ``jacobians``), also the derivatives with respect to :attr:`parameter_names`.
+
+        Returns:
+            a :class:`~drake_abs.contact.step.Step` over the nc contact candidates: ``impulse``
+            is each candidate's normal impulse, ``friction_impulse`` its tangential impulse
+            (B, nc, 3), ``active`` which candidates were in the LCP.
+        """
         if parameters and not jacobians:
             raise ValueError("parameters=True needs jacobians=True")
         nq, nv, nu, nc = self.sizes
@@ -161,7 +132,7 @@ class ComplementarityStepper:
             active = np.ones((B, nc), dtype=bool)
         out = {
             "x_next": np.empty((B, nq + nv)),
-            "normal_impulse": np.zeros((B, nc)),
+            "impulse": np.zeros((B, nc)),
             "friction_impulse": np.zeros((B, nc, 3)),
             "mu": np.zeros((B, nc)),
             "converged": np.ones(B, dtype=bool),
@@ -171,12 +142,12 @@ class ComplementarityStepper:
             out.update(
                 dx_dx=np.empty((B, nq + nv, nq + nv)),
                 dx_du=np.empty((B, nq + nv, nu)),
-                dn_dx=np.zeros((B, nc, nq + nv)),
-                dn_du=np.zeros((B, nc, nu)),
+                dimpulse_dx=np.zeros((B, nc, nq + nv)),
+                dimpulse_du=np.zeros((B, nc, nu)),
             )
         if parameters:
             T = len(self.parameter_names)
-            out.update(dx_dtheta=np.empty((B, nq + nv, T)), dn_dtheta=np.zeros((B, nc, T)))
+            out.update(dx_dtheta=np.empty((B, nq + nv, T)), dimpulse_dtheta=np.zeros((B, nc, T)))
         if groups is None:
             groups = _groups_by_active_set(active)
         for rows, idx, quant in groups:
@@ -210,7 +181,7 @@ class ComplementarityStepper:
                 stacklevel=2,
             )
         names = self.parameter_names if parameters else ()
-        return RigidStepResult(active=active, theta_names=names, **out)
+        return Step(active=active, theta_names=names, **out)
 
     def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
         """Write one group's step into the batch outputs (rows: a slice or row indices)."""
@@ -232,14 +203,17 @@ class ComplementarityStepper:
         fr = idx[cone.frictional]
         beta = r.lam[:, nc_g : nc_g + nt].reshape(r.lam.shape[0], -1, cone.directions)
         blocks = [
-            ("normal_impulse", idx, r.lam[:, :nc_g]),
+            ("impulse", idx, r.lam[:, :nc_g]),
             ("mu", idx, r.mu),
             ("friction_impulse", fr, beta @ self.model.tangents),
         ]
         if jacobians:
-            blocks += [("dn_dx", idx, r.dlam_dx[:, :nc_g]), ("dn_du", idx, r.dlam_du[:, :nc_g])]
+            blocks += [
+                ("dimpulse_dx", idx, r.dlam_dx[:, :nc_g]),
+                ("dimpulse_du", idx, r.dlam_du[:, :nc_g]),
+            ]
         if r.dlam_dtheta is not None:
-            blocks.append(("dn_dtheta", idx, r.dlam_dtheta[:, :nc_g]))
+            blocks.append(("dimpulse_dtheta", idx, r.dlam_dtheta[:, :nc_g]))
         for key, cols, value in blocks:
             if whole:
                 out[key][:, cols] = value

@@ -15,10 +15,11 @@
 Every estimator takes a :class:`PolicyObjective`, theta and a numpy Generator (all randomness
 comes from it: the same seed gives the same numbers) and returns a :class:`GradientEstimate`.
 
-Unconverged solver steps: the objective's ``on_unconverged`` policy (default ``"drop"``, see
-:func:`drake_abs.policy.rollout.rollout_policy`) decides; under ``"drop"`` every average runs
-over the rollouts whose steps all converged, and the estimate says how many were dropped. An
-estimate with no usable rollout raises :class:`~drake_abs.policy.rollout.UnconvergedStepError`.
+Every rollout runs in the one closed-loop engine (:func:`drake_abs.engine.rollout`).
+Unconverged solver steps: the objective's ``on_unconverged`` policy (default ``"drop"``) decides;
+under ``"drop"`` every average runs over the rollouts whose steps all converged, and the estimate
+says how many were dropped. An estimate with no usable rollout raises
+:class:`~drake_abs.contact.unconverged.UnconvergedStepError`.
 """
 
 from __future__ import annotations
@@ -27,16 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_abs.policy.policies import Policy
-from drake_abs.policy.rewards import Reward
-from drake_abs.policy.rollout import (
-    PolicyRollout,
-    Stepper,
+from drake_abs.contact.unconverged import (
     UnconvergedPolicy,
     UnconvergedStepError,
     check_unconverged_policy,
-    rollout_policy,
 )
+from drake_abs.engine import Policy, Reward, Stepper, Trajectory, rollout
+from drake_abs.engine.closed_loop import STEPPER_FORM
+from drake_abs.engine.protocols import check_protocol
 
 
 @dataclass(frozen=True)
@@ -44,14 +43,14 @@ class PolicyObjective:
     """The stochastic objective: dynamics, policy, reward, initial state(s), horizon, noise.
 
     Args:
-        stepper: batched dynamics (:class:`~drake_abs.policy.rollout.Stepper`).
-        policy: a policy of :mod:`drake_abs.policy.policies`.
-        reward: a reward of :mod:`drake_abs.policy.rewards`.
+        stepper: batched dynamics (a :class:`~drake_abs.engine.Stepper`).
+        policy: a :class:`~drake_abs.engine.Policy` (e.g. of :mod:`drake_abs.policy.policies`).
+        reward: a :class:`~drake_abs.engine.Reward` (maximised).
         x0: (nx,) initial state.
         horizon: H steps.
         sigma: exploration noise scale (units of u).
         on_unconverged: ``"drop"`` (default), ``"flag"`` or ``"raise"``: what rollouts with an
-            unconverged solver step count for (:func:`~drake_abs.policy.rollout.rollout_policy`).
+            unconverged solver step count for (:func:`~drake_abs.engine.rollout`).
     """
 
     stepper: Stepper
@@ -64,15 +63,9 @@ class PolicyObjective:
 
     def __post_init__(self):
         check_unconverged_policy(self.on_unconverged)
-        if not isinstance(self.policy, Policy):
-            raise TypeError(
-                "policy must be a Policy (nx, nu, n_params, act, jacobians, vjp); "
-                f"got {type(self.policy).__name__}"
-            )
-        if not isinstance(self.reward, Reward):
-            raise TypeError(
-                f"reward must be a Reward (stage, terminal); got {type(self.reward).__name__}"
-            )
+        check_protocol(self.stepper, Stepper, "stepper", STEPPER_FORM)
+        check_protocol(self.policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
+        check_protocol(self.reward, Reward, "reward", "stage, terminal")
         if int(self.horizon) < 1:
             raise ValueError(f"horizon must be >= 1; got {self.horizon!r}")
         if not (np.isfinite(self.sigma) and self.sigma >= 0):
@@ -81,8 +74,8 @@ class PolicyObjective:
     def noise(self, rng: np.random.Generator, M: int) -> np.ndarray:
         return rng.standard_normal((M, int(self.horizon), self.policy.nu))
 
-    def rollout(self, theta, noise: np.ndarray, gradient: bool = True) -> PolicyRollout:
-        return rollout_policy(
+    def rollout(self, theta, noise: np.ndarray, gradient: bool = True) -> Trajectory:
+        return rollout(
             self.stepper, self.policy, theta, self.x0, noise, self.reward,
             sigma=self.sigma, gradient=gradient, on_unconverged=self.on_unconverged,
         )  # fmt: skip
@@ -102,7 +95,7 @@ class GradientEstimate:
     dropped: int = 0
 
 
-def _summary(grad, returns, rollouts: list[PolicyRollout]) -> GradientEstimate:
+def _summary(grad, returns, rollouts: list[Trajectory]) -> GradientEstimate:
     steps = sum(r.converged.size for r in rollouts)
     bad = sum(int((~r.converged).sum()) for r in rollouts)
     n = sum(r.converged.shape[0] for r in rollouts)
@@ -124,7 +117,7 @@ def first_order(obj: PolicyObjective, theta, rng: np.random.Generator, M: int) -
     return _summary(r.grad[r.used].mean(axis=0), r.returns[r.used], [r])
 
 
-def _score(obj: PolicyObjective, theta, r: PolicyRollout, noise: np.ndarray) -> np.ndarray:
+def _score(obj: PolicyObjective, theta, r: Trajectory, noise: np.ndarray) -> np.ndarray:
     """sum_t grad_theta log pi(u_t | x_t) per rollout (M, P): (xi_t / sigma) dpi/dtheta."""
     if obj.sigma <= 0:
         raise ValueError("the likelihood-ratio estimator needs exploration noise: sigma > 0")

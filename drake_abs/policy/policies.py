@@ -4,7 +4,8 @@ policy-gradient engine needs (docs/math.md section 7; paper 000 eq. 4.1).
 Exploration noise is not part of a policy: rollouts add ``sigma xi_t`` to its output
 (reparameterisation), so first-order gradients flow through the same ``pi``.
 
-Every policy gives, for states x (M, nx) and a flat parameter vector theta (P,):
+Every policy follows :class:`drake_abs.engine.Policy`: for states x (M, nx) and a flat parameter
+vector theta (P,):
 
 - ``act(theta, x)`` -> u (M, nu);
 - ``jacobians(theta, x)`` -> (du/dx (M, nu, nx), du/dtheta (M, nu, P));
@@ -15,28 +16,13 @@ Every policy gives, for states x (M, nx) and a flat parameter vector theta (P,):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from drake_abs._validation import as_finite_array
+from drake_abs.engine.protocols import Policy
 
-
-@runtime_checkable
-class Policy(Protocol):
-    """What rollouts need of a policy (see the module docstring for shapes)."""
-
-    nx: int
-    nu: int
-
-    @property
-    def n_params(self) -> int: ...
-
-    def act(self, theta, x) -> np.ndarray: ...
-
-    def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]: ...
-
-    def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]: ...
+__all__ = ["LinearPolicy", "MLPPolicy", "Policy"]
 
 
 def _check(theta, x, n_params: int, nx: int) -> tuple[np.ndarray, np.ndarray]:

@@ -11,20 +11,13 @@ Rewards are maximised: costs enter with a minus sign.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from drake_abs._validation import as_finite_array
+from drake_abs.engine.protocols import Reward
 
-
-@runtime_checkable
-class Reward(Protocol):
-    """What rollouts need of a reward (maximised; see the module docstring for shapes)."""
-
-    def stage(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-
-    def terminal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+__all__ = ["QuadraticReward", "Reward"]
 
 
 @dataclass(frozen=True)

@@ -40,9 +40,8 @@ from drake_abs.contact.contact_lcp import (
     assemble_lcp,
     expand_mu,
 )
-from drake_abs.contact.lcs import LCS, GradientMode
+from drake_abs.contact.lcs import LCS, GradientMode, LcsStepper
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
-from drake_abs.policy.rollout import LcsStepper
 
 #: Tangent directions of the planar cone, in (x, z) velocity coordinates: +x, -x (the order of
 #: ``systems.multibody_quantities.tangent_directions`` for the normal +z and k = 2).
@@ -174,7 +173,7 @@ class TranslatingBox:
     def stepper(
         self, contact: SmoothingPolicy | None = None, gradient: GradientMode = "total"
     ) -> LcsStepper:
-        """A batched :class:`~drake_abs.policy.rollout.LcsStepper` of this box."""
+        """A batched :class:`~drake_abs.contact.lcs.LcsStepper` of this box."""
         return LcsStepper(self.lcs, self.smoothing(contact), gradient)
 
     def resting_state(self, p_x: float = 0.0, v_x: float = 0.0) -> np.ndarray:

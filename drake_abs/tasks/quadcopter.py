@@ -44,10 +44,12 @@ The constraints of paper 003 section 7 are in :class:`QuadcopterConstraints`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from drake_abs._validation import as_finite_array
+from drake_abs.contact.step import Step, contact_free_step
 
 NX = 12
 NU = 4
@@ -127,21 +129,6 @@ class QuadcopterConstraints:
     def input_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(u_min, u_max), each (4,) rad/s."""
         return np.zeros(NU), np.full(NU, self.rotor_speed_max)
-
-
-@dataclass(frozen=True)
-class QuadcopterStep:
-    """One forward-Euler step for a batch of states (leading shape ``S``; none for one state).
-
-    Attributes:
-        x_next: S + (12,) next state.
-        dx_dx: S + (12, 12) Jacobian d x_next / d x, or None when not requested.
-        dx_du: S + (12, 4) Jacobian d x_next / d u (s/rad units on the rotor speeds), or None.
-    """
-
-    x_next: np.ndarray
-    dx_dx: np.ndarray | None
-    dx_du: np.ndarray | None
 
 
 def _inputs(x, u) -> tuple[np.ndarray, np.ndarray]:
@@ -259,10 +246,9 @@ def dynamics(
     return f, fx, fu
 
 
-def step(
-    x, u, params: QuadcopterParams | None = None, *, jacobians: bool = False
-) -> QuadcopterStep:
-    """One forward-Euler step x+ = x + dt f(x, u) (dt = ``params.time_step``), batched.
+def step(x, u, params: QuadcopterParams | None = None, *, jacobians: bool = False) -> Step:
+    """One forward-Euler step x+ = x + dt f(x, u) (dt = ``params.time_step``), batched: the
+    contact-free :class:`~drake_abs.contact.step.Step` (every step converged, no impulses).
 
     Args:
         x: S + (12,) states; u: S + (4,) rotor speeds (rad/s). Non-finite values or wrong shapes
@@ -276,8 +262,24 @@ def step(
     dt = prm.time_step
     x_next = x + dt * f
     if not jacobians:
-        return QuadcopterStep(x_next, None, None)
-    return QuadcopterStep(x_next, np.eye(NX) + dt * fx, dt * fu)
+        return contact_free_step(x_next)
+    return contact_free_step(x_next, np.eye(NX) + dt * fx, dt * fu)
+
+
+@dataclass(frozen=True)
+class QuadcopterStepper:
+    """The quadcopter as a batched stepper (:class:`drake_abs.engine.Stepper`) of
+    :func:`step`, for the closed-loop engine."""
+
+    params: QuadcopterParams = QuadcopterParams()
+
+    parameter_names: ClassVar[tuple[str, ...]] = ()
+
+    def step(self, x, u, *, jacobians: bool = True, parameters: bool = False) -> Step:
+        """:func:`step` with these parameters: x (M, 12), u (M, 4)."""
+        if parameters:
+            raise ValueError("parameters=True: QuadcopterStepper names no model parameters")
+        return step(x, u, self.params, jacobians=jacobians)
 
 
 def hover_linearization(

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drake_abs import ContactAware, point_mass_lcs, rollout
+from drake_abs import ContactAware, LcsStepper, open_loop, point_mass_lcs
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 
@@ -29,23 +29,26 @@ def test_default_drops_the_jacobians_of_unconverged_rollouts():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)
         with pytest.warns(UnconvergedStepWarning, match="1 of 2 rollouts"):
-            r = rollout(_starved(), X0, U, ContactAware(1e-2, 0.05), gradient="total")
+            r = open_loop(LcsStepper(_starved(), ContactAware(1e-2, 0.05), "total"), X0, U)
     assert r.converged[0].all() and not r.converged[1].any()
     assert r.used.tolist() == [True, False]
-    assert np.isnan(r.dxN_dx0[1]).all() and np.isnan(r.dxN_du[1]).all()
-    assert np.isfinite(r.dxN_dx0[0]).all()
-    full = rollout(point_mass_lcs(2, time_step=0.01), X0, U, ContactAware(1e-2, 0.05),
-                   gradient="total")  # fmt: skip
-    np.testing.assert_allclose(r.dxN_dx0[0], full.dxN_dx0[0], rtol=1e-12)
+    assert np.isnan(r.dxH_dx0[1]).all() and np.isnan(r.dxH_du[1]).all()
+    assert np.isfinite(r.dxH_dx0[0]).all()
+    full = open_loop(LcsStepper(point_mass_lcs(2, time_step=0.01), ContactAware(1e-2, 0.05)), X0, U)
+    np.testing.assert_allclose(r.dxH_dx0[0], full.dxH_dx0[0], rtol=1e-12)
 
 
 def test_flag_keeps_them_and_raise_refuses():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)
         with pytest.warns(UnconvergedStepWarning, match="kept"):
-            r = rollout(_starved(), X0, U, ContactAware(1e-2, 0.05), on_unconverged="flag")
-        assert r.used.all() and np.isfinite(r.dxN_dx0).all()
+            r = open_loop(
+                LcsStepper(_starved(), ContactAware(1e-2, 0.05)), X0, U, on_unconverged="flag"
+            )
+        assert r.used.all() and np.isfinite(r.dxH_dx0).all()
         with pytest.raises(UnconvergedStepError, match="1 of 2"):
-            rollout(_starved(), X0, U, ContactAware(1e-2, 0.05), on_unconverged="raise")
+            open_loop(
+                LcsStepper(_starved(), ContactAware(1e-2, 0.05)), X0, U, on_unconverged="raise"
+            )
     with pytest.raises(ValueError, match="on_unconverged"):
-        rollout(_starved(), X0, U, on_unconverged="skip")
+        open_loop(LcsStepper(_starved()), X0, U, on_unconverged="skip")

@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 
 from drake_abs import ContactAware, Fixed, point_mass_lcs
+from drake_abs.contact.lcs import LcsStepper
 from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
+from drake_abs.engine import rollout
 from drake_abs.multibody import ComplementarityStepper
 from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
 from drake_abs.multibody.scene import Scene
 from drake_abs.policy.policies import LinearPolicy, MLPPolicy
 from drake_abs.policy.rewards import QuadraticReward
-from drake_abs.policy.rollout import LcsStepper, rollout_policy
 from drake_abs.systems import ComplementarityPlant, LcsPlant
 
 H_STEP = 0.02
@@ -41,7 +42,7 @@ def test_lcs_diagram_gradient_equals_the_batched_engine(policy, smoothing, gradi
     theta = 0.2 * rng.standard_normal(policy.n_params)
     noise = rng.standard_normal((30, 2))
     x0 = np.array([0.0, 0.3, 1.0, -1.0])
-    engine = rollout_policy(
+    engine = rollout(
         LcsStepper(lcs, smoothing, gradient), policy, theta, x0, noise[None], reward, sigma=0.5
     )
     assert engine.x[0, :, 1].min() < 0.01  # it hits the ground
@@ -70,7 +71,7 @@ def test_rigid_body_scene_diagram_gradient_equals_the_batched_engine(rng):
     theta = np.concatenate([0.1 * rng.standard_normal(6), [1.0]])
     noise = rng.standard_normal((15, 1))
     x0 = np.concatenate([sm.q0, sm.v0])
-    engine = rollout_policy(stepper, policy, theta, x0, noise[None], reward, sigma=0.5)
+    engine = rollout(stepper, policy, theta, x0, noise[None], reward, sigma=0.5)
     assert engine.converged.all()
     pd = build_policy_diagram(
         ComplementarityPlant(stepper), policy, reward, theta, noise, scene.time_step,

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from numdiff import central_difference
 
+from drake_abs.engine import rollout
 from drake_abs.experiments import ball_throw as bt
 from drake_abs.policy.estimators import first_order
-from drake_abs.policy.rollout import rollout_policy
 from drake_abs.policy.training import Adam, train
 
 CONFIG = bt.Config.test_size()
@@ -24,7 +24,7 @@ CONFIG = bt.Config.test_size()
 
 def _return(obj, angle: float) -> float:
     noise = np.zeros((1, CONFIG.horizon, 1))
-    r = rollout_policy(obj.stepper, obj.policy, np.array([angle]), obj.x0, noise, obj.reward,
+    r = rollout(obj.stepper, obj.policy, np.array([angle]), obj.x0, noise, obj.reward,
                        sigma=0.0, gradient=False)  # fmt: skip
     return float(r.returns[0])
 
@@ -36,7 +36,7 @@ def test_return_derivative_matches_central_differences(method):
     obj = bt.objective(CONFIG, bt.smoothing_for(method, CONFIG))
     for angle in (0.9, 1.2):
         noise = np.zeros((1, CONFIG.horizon, 1))
-        r = rollout_policy(obj.stepper, obj.policy, np.array([angle]), obj.x0, noise,
+        r = rollout(obj.stepper, obj.policy, np.array([angle]), obj.x0, noise,
                            obj.reward, sigma=0.0)  # fmt: skip
         fd = central_difference(lambda a, o=obj: np.array([_return(o, a[0])]), [angle], eps=1e-6)
         assert r.grad[0, 0] == pytest.approx(fd[0, 0], rel=1e-4, abs=1e-6)
@@ -46,7 +46,7 @@ def test_the_ball_lands_before_the_goal_and_stops():
     obj = bt.objective(CONFIG)
     noise = np.zeros((1, CONFIG.horizon, 1))
     for angle in (0.0, 0.8, 1.3):
-        r = rollout_policy(obj.stepper, obj.policy, np.array([angle]), obj.x0, noise,
+        r = rollout(obj.stepper, obj.policy, np.array([angle]), obj.x0, noise,
                            obj.reward, sigma=0.0, gradient=False)  # fmt: skip
         x = r.x[0]
         on_ground = np.flatnonzero(x[:, 1] <= CONFIG.radius + 1e-9)

@@ -15,9 +15,10 @@ from drake_abs import (
     LCPConvergenceWarning,
     LCPRegularizationWarning,
     LCPStatus,
+    LcsStepper,
     MatrixClass,
+    open_loop,
     point_mass_lcs,
-    rollout,
     solve_lcp,
 )
 
@@ -164,14 +165,16 @@ def test_lcs_validation_names_the_matrix():
         lcs.step(np.zeros((3, 4)), np.zeros((2, 2)))
     with pytest.raises(ValueError, match="gradient must be 'frozen' or 'total'"):
         lcs.step(np.zeros(4), np.zeros(2), gradient="full")
-    with pytest.raises(ValueError, match=r"u must have shape \(N, du\) or \(B, N, du\)"):
-        rollout(lcs, np.zeros(4), np.zeros((5, 3)))
+    with pytest.raises(ValueError, match=r"u must have shape \(du,\) or \(B, du\) = \(1, 2\)"):
+        open_loop(LcsStepper(lcs), np.zeros(4), np.zeros((5, 3)))
+    with pytest.raises(ValueError, match=r"u must have shape \(N, nu\) or \(B, N, nu\) with B = 2"):
+        open_loop(LcsStepper(lcs), np.zeros((2, 4)), np.zeros((3, 5, 2)))
     with pytest.raises(ValueError, match="time_step must be a finite number > 0"):
         point_mass_lcs(2, time_step=0.0)
     with pytest.raises(ValueError, match=r"^x contains NaN or inf"):
         lcs.step(np.array([0.0, np.nan, 0.0, 0.0]), np.zeros(2))
     with pytest.raises(ValueError, match=r"^x0 contains NaN or inf"):
-        rollout(lcs, np.array([0.0, np.inf, 0.0, 0.0]), np.zeros((3, 2)))
+        open_loop(LcsStepper(lcs), np.array([0.0, np.inf, 0.0, 0.0]), np.zeros((3, 2)))
     with pytest.raises(ValueError, match=r"solver_options may set tol.*\['jacobians'\]"):
         LCS(**kwargs, solver_options={"jacobians": True})
     with pytest.raises(ValueError, match="tol must be a positive finite number"):

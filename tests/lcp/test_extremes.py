@@ -146,7 +146,7 @@ def test_point_mass_stiff_and_large_time_steps(h, mass, policy):
     x[:, 2] = [-1e3, -1.0, -1e-6, 0.0, 1e-6, 1.0, 1e3]  # deep penetration to far away
     x[:, 5] = -10.0
     r = lcs.step(x, np.zeros(3), policy, gradient="total", strict=True)
-    for name in ("x_next", "lam", "dx_dx", "dx_du", "dlam_dx"):
+    for name in ("x_next", "impulse", "dx_dx", "dx_du", "dimpulse_dx"):
         assert np.all(np.isfinite(getattr(r, name))), name
     if isinstance(policy, Exact):
         # hard contact: no penetration after the step (up to the solver's tolerance)

@@ -13,8 +13,9 @@ from drake_abs import (
     Exact,
     Fixed,
     GaussianMatched,
+    LcsStepper,
+    open_loop,
     point_mass_lcs,
-    rollout,
     solve_lcp,
 )
 from drake_abs.lcp.sensitivity import dlam_dF
@@ -142,14 +143,14 @@ def test_rollout_chain_rule_matches_finite_differences(policy, rng):
     lcs = point_mass_lcs(2, time_step=0.01)
     x0 = np.array([0.0, 0.3, 1.0, 0.5])
     u = rng.normal(size=(40, 2))
-    r = rollout(lcs, x0, u, policy, gradient="total")
+    r = open_loop(LcsStepper(lcs, policy, "total"), x0, u)
     assert r.converged.all()
 
     def final(x, uu=u):
-        return rollout(lcs, x, uu, policy, jacobians=False).x[0, -1]
+        return open_loop(LcsStepper(lcs, policy), x, uu, jacobians=False).x[0, -1]
 
     fd_x = central_difference(final, x0, eps=1e-7)
-    np.testing.assert_allclose(r.dxN_dx0[0], fd_x, atol=1e-5 * (1 + np.abs(fd_x).max()))
+    np.testing.assert_allclose(r.dxH_dx0[0], fd_x, atol=1e-5 * (1 + np.abs(fd_x).max()))
     fd_u = central_difference(lambda uf: final(x0, uf.reshape(u.shape)), u.ravel(), eps=1e-7)
-    analytic = r.dxN_du[0].transpose(1, 0, 2).reshape(4, -1)
+    analytic = r.dxH_du[0].transpose(1, 0, 2).reshape(4, -1)
     np.testing.assert_allclose(analytic, fd_u, atol=1e-5 * (1 + np.abs(fd_u).max()))

@@ -19,8 +19,8 @@ from mpc_setup import (
 )
 from numdiff import central_difference
 
+from drake_abs.engine import LinearStepper
 from drake_abs.mpc.graybox import (
-    LinearPlant,
     Schedule,
     TrackingCost,
     closed_loop,
@@ -40,8 +40,7 @@ COST = TrackingCost(
 )  # fmt: skip
 
 
-def quad_plant(x, u, jacobians=False):
-    return qc.step(x, u, PRM, jacobians=jacobians)
+quad_plant = qc.QuadcopterStepper(PRM)
 
 
 def paper_mpc(horizon=12, **settings) -> QpMpc:
@@ -68,7 +67,7 @@ def test_exact_closed_loop_gradient_matches_central_differences():
 def test_model_gradient_equals_exact_gradient_when_the_model_is_the_plant(rng):
     """With a linear plant equal to the prediction model, eq. 8a with (A, B) is exact."""
     A = A_H
-    plant = LinearPlant(A, B_H)
+    plant = LinearStepper(A, B_H)
     cost = TrackingCost(np.eye(12), 0.01 * np.eye(4), np.eye(12), np.zeros(12), np.zeros(4),
                         X_MIN, X_MAX)  # fmt: skip
     spec = MpcSpec(A, B_H, 8, None, None, U_MIN - U_REF, U_MAX - U_REF, X_MIN, X_MAX)

@@ -19,7 +19,7 @@ from mpc_setup import (
 )
 from numdiff import central_difference
 
-from drake_abs.mpc.graybox import LinearPlant
+from drake_abs.engine import LinearStepper
 from drake_abs.mpc.qp_mpc import (
     MpcSpec,
     MpcStatus,
@@ -95,13 +95,13 @@ def test_unconstrained_mpc_with_riccati_terminal_cost_is_lqr(rng):
             np.testing.assert_allclose(sol.u0, U_REF - K_LQR @ (x - X_REF), rtol=1e-9, atol=1e-9)
             np.testing.assert_allclose(sol.du0_dx, -K_LQR, rtol=1e-8, atol=1e-9)
     # closed loop on the model itself: chain du0/dx through T steps
-    plant = LinearPlant(A_H, B_H)
+    plant = LinearStepper(A_H, B_H)
     mpc = QpMpc(MpcSpec(A_H, B_H, 12, np.zeros(12), np.zeros(4)), THETA)
     x = rng.normal(size=12)
     J = np.eye(12)
     for _ in range(20):
         sol = mpc.solve(x, jacobians=True)
-        step = plant(x, sol.u0, jacobians=True)
+        step = plant.step(x, sol.u0, jacobians=True)
         J = (step.dx_dx + step.dx_du @ sol.du0_dx) @ J
         x = step.x_next
     closed = np.linalg.matrix_power(A_H - B_H @ K_LQR, 20)

@@ -5,15 +5,14 @@ scenes (for the mass: the model file re-written with the mass and inertia scaled
 
 from __future__ import annotations
 
-import re
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
+from scene_variants import with_friction, with_mass
 
 from drake_abs.contact.smoothing import ContactAware, Exact
-from drake_abs.multibody import PACKAGE_DIR, Scene, build_scene_model
+from drake_abs.multibody import Scene, build_scene_model
 
 EPS = 1e-6
 
@@ -35,29 +34,6 @@ def _next_state(scene: Scene, smoothing, x, u) -> np.ndarray:
     step = build_scene_model(scene).stepper(smoothing=smoothing).step(x[None], u, jacobians=False)
     assert step.converged.all()
     return step.x_next[0]
-
-
-def _with_mass(scene: Scene, body: str, factor: float, folder: Path) -> Scene:
-    """The scene with ``body``'s mass and rotational inertia scaled by ``factor`` (centre of
-    mass and unit inertia held, as Drake's ``RigidBody::SetMass``), through a re-written SDF."""
-    spec = scene.models[0]
-    text = (PACKAGE_DIR / spec.file.removeprefix("drake_abs:")).read_text()
-    link = re.search(rf'<link name="{body}">.*?</inertial>', text, flags=re.S)
-    scaled = re.sub(
-        r"<(mass|ixx|iyy|izz|ixy|ixz|iyz)>([^<]+)</\1>",
-        lambda m: f"<{m.group(1)}>{float(m.group(2)) * factor!r}</{m.group(1)}>",
-        link.group(0),
-    )
-    path = folder / f"{body}_{factor!r}.sdf"
-    path.write_text(text[: link.start()] + scaled + text[link.end() :])
-    return replace(scene, models=(replace(spec, file=str(path)),))
-
-
-def _with_friction(scene: Scene, k: int, delta: float) -> Scene:
-    """The scene with contact spec k's friction coefficient moved by delta."""
-    contacts = list(scene.contacts)
-    contacts[k] = replace(contacts[k], friction=contacts[k].friction + delta)
-    return replace(scene, contacts=tuple(contacts))
 
 
 # which derivatives must be non-zero here (the physics says so; "non-zero" is above 1e-5, far
@@ -87,7 +63,7 @@ def test_parameter_jacobians_match_central_differences(name, smoothing, tmp_path
     assert names[1 + nc :] == tuple(f"mass[{b}]" for b in bodies)
     nx = x.size
     assert r.dx_dtheta.shape == (1, nx, len(names)) and r.dx_du.shape == (1, nx, u.size)
-    assert r.dn_dtheta.shape == (1, nc, len(names))
+    assert r.dimpulse_dtheta.shape == (1, nc, len(names))
     scale = 1.0 + np.abs(r.dx_dtheta).max()
     # ground height
     fd = (
@@ -102,8 +78,8 @@ def test_parameter_jacobians_match_central_differences(name, smoothing, tmp_path
         cols = [1 + start + j for j in range(len(spec.points))]
         start += len(spec.points)
         fd = (
-            _next_state(_with_friction(scene, k, EPS), smoothing, x, u)
-            - _next_state(_with_friction(scene, k, -EPS), smoothing, x, u)
+            _next_state(with_friction(scene, k, EPS), smoothing, x, u)
+            - _next_state(with_friction(scene, k, -EPS), smoothing, x, u)
         ) / (2 * EPS)
         assert np.abs(fd).max() > 1e-5 or "friction" not in DEPENDS[name]
         np.testing.assert_allclose(r.dx_dtheta[0][:, cols].sum(axis=1), fd, atol=1e-5 * scale)
@@ -111,8 +87,8 @@ def test_parameter_jacobians_match_central_differences(name, smoothing, tmp_path
     for j, body in enumerate(bodies):
         m = model.plant.GetBodyByName(body).default_mass()
         fd = (
-            _next_state(_with_mass(scene, body, 1 + EPS / m, tmp_path), smoothing, x, u)
-            - _next_state(_with_mass(scene, body, 1 - EPS / m, tmp_path), smoothing, x, u)
+            _next_state(with_mass(scene, body, 1 + EPS / m, tmp_path), smoothing, x, u)
+            - _next_state(with_mass(scene, body, 1 - EPS / m, tmp_path), smoothing, x, u)
         ) / (2 * EPS)
         assert np.abs(fd).max() > 1e-5 or "mass" not in DEPENDS[name]
         np.testing.assert_allclose(r.dx_dtheta[0, :, 1 + nc + j], fd, atol=1e-5 * scale)

@@ -85,7 +85,7 @@ def test_pruning_under_smoothing_changes_results_by_the_dropped_impulses():
     x = np.concatenate([sm.q0, sm.v0])[None]
     a, b = full.step(x, np.zeros((1, 1))), pruned.step(x, np.zeros((1, 1)))
     far = ~b.active[0]
-    dropped = a.normal_impulse[0, far]
+    dropped = a.impulse[0, far]
     assert np.all(dropped > 0) and np.all(dropped < 2 * mu / 0.19)  # ~ mu / phi, phi ~ 0.2 m
     quant = sm.contact_model.quantities(x[:, :3], x[:, 3:], np.zeros((1, 1)))
     mobility = np.abs(quant.W[0] @ quant.Jn[0].T).max()  # velocity change per unit impulse

@@ -138,7 +138,7 @@ def rollout(name):
         assert r.converged[0], f"{name}: step {k} did not converge from x = {x.tolist()}"
         assert np.all(np.isfinite(r.x_next))
         xs.append(r.x_next[0])
-        impulses.append(r.normal_impulse[0])
+        impulses.append(r.impulse[0])
         iterations.append(r.iterations[0])
     return np.array(xs), np.array(impulses), np.array(iterations)
 
@@ -296,7 +296,7 @@ def test_step_jacobian_matches_finite_differences(name, label, policy):
     margin = np.abs(model.distances(x[None, : model.nq]) - scene.activation_distance).min()
     assert margin > 1e-3
     if label == "contact":
-        assert r.normal_impulse[0].max() > 1e-4
+        assert r.impulse[0].max() > 1e-4
     engaged = policy == "contact_aware" and (label == "approach" or len(model.contacts) > 1)
     assert (r.mu[0].max() > 1e-12) == engaged  # (exact contact solves to a floor ~1e-25)
     # strict complementarity: every LCP row has its variable or its slack clearly positive
@@ -354,4 +354,4 @@ def test_an_empty_batch_gives_empty_results():
     nq, nv, nu, nc = stepper.sizes
     r = stepper.step(np.zeros((0, nq + nv)), np.zeros((0, nu)))
     assert r.x_next.shape == (0, nq + nv) and r.dx_dx.shape == (0, nq + nv, nq + nv)
-    assert r.normal_impulse.shape == (0, nc) and r.converged.shape == (0,)
+    assert r.impulse.shape == (0, nc) and r.converged.shape == (0,)

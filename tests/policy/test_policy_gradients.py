@@ -15,6 +15,8 @@ import pytest
 from numdiff import central_difference
 
 from drake_abs import ContactAware, Fixed, point_mass_lcs
+from drake_abs.contact.lcs import LcsStepper
+from drake_abs.engine import rollout, rollout_memory_bytes
 from drake_abs.policy.estimators import (
     PolicyObjective,
     alpha_order,
@@ -25,7 +27,6 @@ from drake_abs.policy.estimators import (
 )
 from drake_abs.policy.policies import LinearPolicy, MLPPolicy
 from drake_abs.policy.rewards import QuadraticReward
-from drake_abs.policy.rollout import LcsStepper, rollout_memory_bytes, rollout_policy
 from drake_abs.policy.training import SGD, Adam, train
 
 NX, NU = 4, 2  # the 2-D point mass: x = (p_x, p_z, v_x, v_z), u = force
@@ -90,7 +91,7 @@ def test_adjoint_gradient_matches_forward_mode_and_finite_differences(
     stepper, reward, x0, H = ball_task(smoothing, gradient)
     theta = 0.1 * rng.standard_normal(policy.n_params)
     noise = rng.standard_normal((3, H, NU))
-    r = rollout_policy(stepper, policy, theta, x0, noise, reward, sigma=0.5)
+    r = rollout(stepper, policy, theta, x0, noise, reward, sigma=0.5)
     assert r.converged.all()
     assert r.x[:, :, 1].min() < 0.05  # the ball reaches the ground: contact is in the gradient
     fwd = forward_mode_gradient(stepper, policy, theta, x0, noise, reward, 0.5)
@@ -98,7 +99,7 @@ def test_adjoint_gradient_matches_forward_mode_and_finite_differences(
     for m in range(3):
 
         def J(th, m=m):
-            one = rollout_policy(
+            one = rollout(
                 stepper, policy, th, x0, noise[m : m + 1], reward, sigma=0.5, gradient=False
             )
             return one.returns[0]
@@ -106,7 +107,7 @@ def test_adjoint_gradient_matches_forward_mode_and_finite_differences(
         fd = central_difference(J, theta, eps=1e-6)
         np.testing.assert_allclose(r.grad[m], fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
         fd_x0 = central_difference(
-            lambda y, m=m: rollout_policy(
+            lambda y, m=m: rollout(
                 stepper, policy, theta, y, noise[m : m + 1], reward, sigma=0.5, gradient=False
             ).returns[0],
             x0,
@@ -164,13 +165,13 @@ def test_bad_input_names_the_argument():
     pol = LinearPolicy(NX, NU)
     theta = np.zeros(pol.n_params)
     with pytest.raises(ValueError, match="theta"):
-        rollout_policy(stepper, pol, theta[:-1], x0, np.zeros((2, H, NU)), reward)
+        rollout(stepper, pol, theta[:-1], x0, np.zeros((2, H, NU)), reward)
     with pytest.raises(ValueError, match="noise"):
-        rollout_policy(stepper, pol, theta, x0, np.zeros((2, H)), reward)
+        rollout(stepper, pol, theta, x0, np.zeros((2, H)), reward)
     with pytest.raises(ValueError, match="x0"):
-        rollout_policy(stepper, pol, theta, np.zeros((3, NX)), np.zeros((2, H, NU)), reward)
+        rollout(stepper, pol, theta, np.zeros((3, NX)), np.zeros((2, H, NU)), reward)
     with pytest.raises(ValueError, match="sigma"):
-        rollout_policy(stepper, pol, theta, x0, np.zeros((2, H, NU)), reward, sigma=-1.0)
+        rollout(stepper, pol, theta, x0, np.zeros((2, H, NU)), reward, sigma=-1.0)
     with pytest.raises(ValueError, match="sigma > 0"):
         zeroth_order(PolicyObjective(stepper, pol, reward, x0, H, 0.0), theta,
                      np.random.default_rng(0), 4)  # fmt: skip
@@ -215,11 +216,12 @@ class _Corrupting:
 
     def __init__(self, inner, bad, t_bad=3):
         self.inner, self.bad, self.t_bad, self.t = inner, np.asarray(bad), t_bad, 0
+        self.parameter_names = ()
 
-    def step(self, x, u, *, jacobians=True):
+    def step(self, x, u, *, jacobians=True, parameters=False):
         from dataclasses import replace
 
-        r = self.inner.step(x, u, jacobians=jacobians)
+        r = self.inner.step(x, u, jacobians=jacobians, parameters=parameters)
         if self.t >= self.t_bad:
             conv = r.converged.copy()
             conv[self.bad] = False
@@ -238,7 +240,7 @@ def _objective(stepper, on_unconverged):
 
 
 def test_unconverged_rollouts_are_dropped_by_default_flagged_or_raised(rng):
-    from drake_abs.policy.rollout import UnconvergedStepError, UnconvergedStepWarning
+    from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 
     inner = ball_task(Fixed(1e-3), "total", horizon=12)[0]
     theta = 0.1 * rng.standard_normal(LinearPolicy(NX, NU).n_params)
@@ -272,7 +274,7 @@ def test_unconverged_rollouts_are_dropped_by_default_flagged_or_raised(rng):
 
 
 def test_dropped_rollouts_carry_nan_gradients_and_every_estimator_honours_the_mask(rng):
-    from drake_abs.policy.rollout import UnconvergedStepError, UnconvergedStepWarning
+    from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 
     inner = ball_task(Fixed(1e-3), "total", horizon=12)[0]
     theta = 0.1 * rng.standard_normal(LinearPolicy(NX, NU).n_params)
@@ -309,8 +311,8 @@ def test_a_non_finite_return_of_a_usable_rollout_raises():
     theta = np.zeros(LinearPolicy(NX, NU).n_params)
     noise = np.zeros((2, horizon, NU))
     with pytest.raises(FloatingPointError, match="return is not finite"):
-        rollout_policy(stepper, LinearPolicy(NX, NU), theta, x0, noise, Overflowing())
-    r = rollout_policy(stepper, LinearPolicy(NX, NU), theta, x0, np.zeros((2, 0, NU)), reward)
+        rollout(stepper, LinearPolicy(NX, NU), theta, x0, noise, Overflowing())
+    r = rollout(stepper, LinearPolicy(NX, NU), theta, x0, np.zeros((2, 0, NU)), reward)
     assert r.x.shape == (2, 1, NX) and np.all(r.grad == 0)  # H = 0: the initial state's value
     np.testing.assert_allclose(r.returns, reward.terminal(r.x[:, 0])[0])
 

@@ -7,7 +7,15 @@ from numdiff import central_difference
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.analysis import Simulator, Simulator_
 
-from drake_abs import ContactAware, Exact, Fixed, GaussianMatched, point_mass_lcs, rollout
+from drake_abs import (
+    ContactAware,
+    Exact,
+    Fixed,
+    GaussianMatched,
+    LcsStepper,
+    open_loop,
+    point_mass_lcs,
+)
 from drake_abs.diagrams import make_lcs_diagram, simulate_with_gradient
 from drake_abs.systems import LcsPlant, autodiff
 
@@ -44,12 +52,12 @@ def test_diagram_gradient_matches_chain_rule_and_finite_differences(policy, grad
     n = 45
     diagram = make_lcs_diagram(lcs, H, policy, gradient=gradient, u=u)
     g = simulate_with_gradient(diagram, x0, n)
-    core = rollout(lcs, x0, np.tile(u, (n, 1)), policy, gradient=gradient)
+    core = open_loop(LcsStepper(lcs, policy, gradient), x0, np.tile(u, (n, 1)))
     assert core.converged.all()
-    assert core.lam.max() > 0.1  # the rollout does go through an impact
+    assert core.impulse.max() > 0.1  # the rollout does go through an impact
     # the same step code: identical to the last bit
     np.testing.assert_array_equal(g.x_final, core.x[0, -1])
-    np.testing.assert_allclose(g.dx_final_dx0, core.dxN_dx0[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(g.dx_final_dx0, core.dxH_dx0[0], rtol=1e-12, atol=1e-12)
     if gradient == "total":  # FD differentiates mu(x) as well, i.e. the total gradient
         fd = central_difference(lambda x: simulate_double(diagram, x, n), x0, eps=1e-7)
         np.testing.assert_allclose(g.dx_final_dx0, fd, atol=1e-5 * (1 + np.abs(fd).max()))
@@ -72,8 +80,8 @@ def test_gradient_with_respect_to_the_input_port():
     ad.get_input_port(0).FixValue(context, InitializeAutoDiff(u.reshape(-1, 1)).ravel())
     simulator.AdvanceTo(n * H)
     (xN,), (grad,) = autodiff.split([plant.state_port.Eval(plant.GetMyContextFromRoot(context))])
-    core = rollout(lcs, x0, np.tile(u, (n, 1)), Fixed(1e-4))
-    np.testing.assert_allclose(grad, core.dxN_du[0].sum(axis=0), rtol=1e-10, atol=1e-12)
+    core = open_loop(LcsStepper(lcs, Fixed(1e-4)), x0, np.tile(u, (n, 1)))
+    np.testing.assert_allclose(grad, core.dxH_du[0].sum(axis=0), rtol=1e-10, atol=1e-12)
 
     def final(uu):
         simulator_d = Simulator(diagram)
@@ -170,14 +178,13 @@ def test_default_derivative_is_the_true_one_everywhere():
     differences of the double diagram confirm; ``frozen`` is only ever asked for explicitly."""
     import inspect
 
-    from drake_abs.contact.lcs import LCS
+    from drake_abs.contact.lcs import LCS, LcsStepper
     from drake_abs.multibody import ComplementarityStepper
     from drake_abs.multibody.builder import SceneModel
-    from drake_abs.policy.rollout import LcsStepper
     from drake_abs.tasks.box_lcs import TranslatingBox
 
     for fn, name in [
-        (LCS.step, "gradient"), (rollout, "gradient"), (make_lcs_diagram, "gradient"),
+        (LCS.step, "gradient"), (make_lcs_diagram, "gradient"),
         (ComplementarityStepper.__init__, "gradient"), (SceneModel.stepper, "gradient"),
         (TranslatingBox.stepper, "gradient"),
     ]:  # fmt: skip

@@ -43,8 +43,7 @@ def paper_spec(horizon=12, **kw):
     return MpcSpec(A_H, B_H, horizon, X_REF, U_REF, U_MIN, U_MAX, X_MIN, X_MAX, **kw)
 
 
-def quad_plant(x, u, jacobians=False):
-    return qc.step(x, u, PRM, jacobians=jacobians)
+quad_plant = qc.QuadcopterStepper(PRM)
 
 
 def test_controller_outputs_the_core_solution_and_its_status():

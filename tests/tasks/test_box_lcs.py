@@ -59,7 +59,9 @@ def test_static_friction_holds_below_the_threshold_and_slides_above():
         x = r.x_next
     assert np.abs(x[:2, 0]).max() < 1e-9 and np.abs(x[:2, 2]).max() < 1e-9
     # the friction impulse balances the push exactly: beta_1 - beta_2 = -u h
-    np.testing.assert_allclose(r.lam[:2, 1] - r.lam[:2, 2], -pushes[:2, 0] * 0.01, rtol=1e-6)
+    np.testing.assert_allclose(
+        r.impulse[:2, 1] - r.impulse[:2, 2], -pushes[:2, 0] * 0.01, rtol=1e-6
+    )
     accel = (pushes[2, 0] - threshold) / box.mass
     assert x[2, 2] == pytest.approx(accel * 40 * 0.01, rel=1e-6)
 

@@ -1,0 +1,26 @@
+"""The one closed-loop engine: the stepper, policy and reward protocols, batched rollouts
+(closed loop, or open loop with given inputs) and their reverse (adjoint) pass, for policy
+gradients, MPC tuning and model learning alike.
+
+Drake-free; any batched stepper (an LCS, a rigid-body scene, a quadcopter) plugs in.
+"""
+
+from drake_abs.engine.adjoint import Adjoints, reverse_pass
+from drake_abs.engine.closed_loop import Trajectory, open_loop, rollout, rollout_memory_bytes
+from drake_abs.engine.protocols import Policy, PullbackPolicy, Reward, Stepper
+from drake_abs.engine.steppers import LinearStepper, ModelJacobians
+
+__all__ = [
+    "Adjoints",
+    "LinearStepper",
+    "ModelJacobians",
+    "Policy",
+    "PullbackPolicy",
+    "Reward",
+    "Stepper",
+    "Trajectory",
+    "open_loop",
+    "reverse_pass",
+    "rollout",
+    "rollout_memory_bytes",
+]
