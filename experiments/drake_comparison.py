@@ -332,26 +332,21 @@ def our_stepper(scene: str, time_step: float, config: Config, policy: str):
 
 
 def our_rollout(stepper, x0, u, steps: int, *, jacobians: bool) -> dict:
-    """States (steps + 1, nx), and (with ``jacobians``) d x_T / d x_0 and d x_T / d u by the
-    chain rule of the one-step implicit Jacobians; seconds per step; solver flags."""
-    x = np.asarray(x0, float).copy()
+    """States (steps + 1, nx), and (with ``jacobians``) d x_T / d x_0 and d x_T / d u (u held
+    constant: the sum of the per-step input Jacobians) by the closed-loop engine's reverse pass
+    (:func:`drake_abs.engine.open_loop`); seconds per step; solver flags."""
+    from drake_abs.engine import open_loop
+
     u = np.asarray(u, float).reshape(1, -1)
-    nx, nu = x.size, u.shape[1]
-    Jx, Ju = np.eye(nx), np.zeros((nx, nu))
-    xs, converged = [x.copy()], True
     start = time.perf_counter()
-    for _ in range(steps):
-        r = stepper.step(x[None], u, jacobians=jacobians)
-        converged &= bool(r.converged.all())
-        if jacobians:
-            Jx = r.dx_dx[0] @ Jx
-            Ju = r.dx_dx[0] @ Ju + r.dx_du[0]
-        x = r.x_next[0]
-        xs.append(x.copy())
+    traj = open_loop(
+        stepper, np.asarray(x0, float), np.repeat(u, steps, axis=0), jacobians=jacobians,
+        on_unconverged="flag",
+    )  # fmt: skip
     seconds = (time.perf_counter() - start) / max(steps, 1)
-    out = {"xs": np.array(xs), "seconds": seconds, "converged": converged}
+    out = {"xs": traj.x[0], "seconds": seconds, "converged": bool(traj.converged.all())}
     if jacobians:
-        out.update(xT=x, dx_dx0=Jx, dx_du=Ju)
+        out.update(xT=traj.x[0, -1], dx_dx0=traj.dxH_dx0[0], dx_du=traj.dxH_du[0].sum(axis=0))
     return out
 
 
@@ -470,7 +465,7 @@ KEY_ENTRIES = {
 # The experiment
 
 
-def _scene_setup(scene: str, config: Config):
+def scene_setup(scene: str, config: Config):
     """(x_0 before settling, u, push duration, settle?)."""
     if scene == "box":
         x0 = np.array([0.0, BOX_HALF[1], 0.0, config.box_speed, 0.0, 0.0])
@@ -504,7 +499,7 @@ def simulate_scene(scene: str, h: float, config: Config, *, gradients: bool,
     d x_T / d x_0, d x_T / d u and a check of one slope (``SLOPE``) against a local central
     difference (step ``config.fd_step``: is the rollout smooth there?) and a secant over
     +-``config.secant_fraction`` of the initial speed (the slope at the scale of the motion)."""
-    x_init, u, duration, settle = _scene_setup(scene, config)
+    x_init, u, duration, settle = scene_setup(scene, config)
     n, n_settle = _steps(duration, h), _steps(config.settle_duration, h)
     analytic = analytic_slide(config, h) if scene == "box" else None
     models = {}  # name -> (kind, roll(x0, u, steps) -> (xs, s/step, converged), gradient)
