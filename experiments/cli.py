@@ -25,6 +25,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "bias-return": "bias_return",
     "ball-throw": "ball_throw",
     "smoothing-vs-rs": "smoothing_vs_rs",
+    "speed-accuracy": "speed_accuracy",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 

@@ -34,6 +34,7 @@ EXPERIMENTS = (
     "bias-return",
     "ball-throw",
     "smoothing-vs-rs",
+    "speed-accuracy",
 )
 # benchmark script -> its arguments (quick sizes); each writes the JSON file named by --json
 BENCHMARKS = {

@@ -20,6 +20,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
+from drake_abs.multibody.affine_dynamics import AffineDynamics
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,9 @@ class ContactModelBase(ABC):
             )
             self._bodies_d.append(body)
         self._setup()
+        #: the affine quantities of a plant with prismatic joints only (None otherwise, or when
+        #: set to None by hand to force the general path): see multibody/affine_dynamics.py
+        self.affine = AffineDynamics.of(self)
 
     @abstractmethod
     def _setup(self) -> None:
@@ -193,6 +197,8 @@ class ContactModelBase(ABC):
         ``derivatives=False``. ``kinematics``: a provider's own kinematics of a one-state batch,
         already evaluated at q (see :meth:`quantities_within`)."""
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
+        if self.affine is not None and kinematics is None:  # one evaluation serves every state
+            return self.affine.quantities(q, v, u, active, derivatives=derivatives)
         if kinematics is not None and len(q) != 1:
             raise ValueError(f"kinematics belong to one state; got a batch of {len(q)}")
         per_state = [

@@ -119,7 +119,8 @@ class ComplementarityStepper:
         q, v = x[:, :nq], x[:, nq:]
         pruned = np.isfinite(self.activation_distance)
         groups = None  # (rows, active contact indices, quantities or None) per active set
-        if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
+        affine = self.model.affine
+        if B == 1 and pruned and affine is None:  # one state: the provider shares kinematics
             idx, quant = self.model.quantities_within(
                 q, v, u, self.activation_distance, derivatives=jacobians
             )
@@ -127,7 +128,8 @@ class ComplementarityStepper:
             active[0, idx] = True
             groups = [(slice(None), idx, quant)]
         elif pruned:
-            active = self.model.distances(q) <= self.activation_distance
+            phi = affine.distances(q) if affine is not None else self.model.distances(q)
+            active = phi <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
             active = np.ones((B, nc), dtype=bool)
         out = {

@@ -1,0 +1,469 @@
+"""The speed/accuracy trade: what each setting costs per simulated second, and how far from the
+truth it lands, for our complementarity plant and Drake's contact models on the same scenes.
+
+Scenes (the two of :mod:`drake_abs.experiments.drake_comparison`, same masses, friction and
+initial states): **box**, the planar box pushed off at 1 m/s that slides to rest on its two
+bottom edges; **ball**, the 5 cm ball dropped from 0.3 m and thrown at 1 m/s, which lands,
+slides and rolls. Every setting starts from the same state.
+
+Settings, each at every time step h of ``time_steps``:
+
+- ours: Exact (hard contact, the solver's default tolerance 1e-12 and the looser ``tolerances``),
+  BS (``Fixed`` mu over ``bs_mu``, given at h = 10 ms and scaled with h so that the barrier acts
+  at the same distance), ABS (``ContactAware``), Gaussian-matched ABS (``GaussianMatched``);
+- Drake: the discrete MultibodyPlant with SAP, Similar and Lagged (compliant point contact,
+  Drake's documented default stiffness and dissipation). MuJoCo is left out: neither scene comes
+  from an MJCF file.
+
+The reference (the "truth") is our Exact plant at ``reference_time_step`` (much finer than any
+h): rigid contact, Coulomb friction. Its own convergence is measured by the same errors of the
+reference at twice its step (``reference_self_error``).
+
+Accuracy measures (all against the reference, on a common time grid every ``sample_period``):
+
+- ``trajectory_error_m``: RMS over the grid of the distance between the body's position and the
+  reference's (m);
+- ``final_error_m``: the same at the last time;
+- ``penetration_m``: the deepest penetration of any contact point over the run (m);
+- ``energy_error_J``: the largest |E(t) - E_ref(t)| over the grid, E kinetic plus potential (J);
+- ``gradient_error``: ||G - G_ref|| / ||G_ref|| (Frobenius), G the derivatives of the final
+  position with respect to two inputs (box: initial speed and push; ball: initial speed and
+  height), ours by the engine's reverse pass, Drake's by AutoDiffXd. G_ref is the reference's
+  slope at the scale of the motion: the least-squares slope of its final position over
+  ``fd_points`` perturbations spread over +-``fd_half_width``. An infinitesimal central
+  difference would not do: the exact discrete model's landing happens at a whole step, so its
+  final position is piecewise constant in the drop height (derivative 0; the rigid-body answer
+  is 2/7 v_0 / (g t_land)). The analytic rigid-body slopes are reported beside G_ref.
+
+Cost: wall-clock seconds per simulated second of one rollout, in double (``cost_s_per_s``) and
+with the gradient (``gradient_cost_s_per_s``), the best of ``repeats`` timings, each setting
+measured in the same run.
+
+Outputs in ``out``: ``summary.json`` (every setting), ``speed_accuracy.png`` (accuracy against
+cost, one panel per scene and measure) and ``speed_accuracy.md`` (the table: for each accuracy,
+the cheapest setting that reaches it).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from drake_abs.experiments import drake_comparison as dc
+
+SCENE_INPUTS = {  # the final position's rows, and the inputs G differentiates with respect to
+    "box": {"rows": (0, 1), "x0_columns": (3,), "push": True, "names": ("vx_0", "push"),
+            "analytic": (("dx_T/dvx_0", 0, 0), ("dx_T/du", 0, 1))},
+    "ball": {"rows": (0, 1, 2), "x0_columns": (7, 2), "push": False, "names": ("vy_0", "z_0"),
+             "analytic": (("dy_T/dvy_0", 1, 0), ("dy_T/dz_0", 1, 1))},
+}  # fmt: skip
+POSITION_ROWS = {"box": (0, 1), "ball": (0, 1, 2)}  # translational coordinates of q (m)
+_TIERS = (1e-2, 1e-3, 1e-4)  # trajectory errors (m) the table asks for
+
+
+@dataclass(frozen=True)
+class Config:
+    """Settings (SI units). A larger mu or sigma is more smoothing.
+
+    Attributes:
+        scenes: ``"box"`` and/or ``"ball"``.
+        time_steps: the steps h every setting runs at (s); each must divide ``sample_period``.
+        reference_time_step: the reference's step (s).
+        sample_period: the common time grid of the errors (s).
+        bs_mu: BS's mu values at h = 10 ms (N s m), scaled with h.
+        gaussian_sigma: GaussianMatched's width (m, in the normal rows' units).
+        tolerances: looser solver tolerances run with Exact (the default 1e-12 always runs).
+        drake: Drake's discrete contact approximations to run.
+        fd_half_width: per scene (box, ball), the half widths of the reference gradient's
+            perturbations of each input (box: m/s, N; ball: m/s, m).
+        fd_points: perturbations per input (the least-squares slope through them).
+        repeats: timed repeats of each rollout (the best is kept).
+        scene_config: the scenes' parameters (masses, friction, speeds, durations, ABS).
+    """
+
+    scenes: tuple[str, ...] = ("box", "ball")
+    time_steps: tuple[float, ...] = (0.02, 0.01, 0.005, 0.0025)
+    reference_time_step: float = 0.0005
+    sample_period: float = 0.02
+    bs_mu: tuple[float, ...] = (1e-7, 1e-6, 1e-5, 1e-4)
+    gaussian_sigma: float = 0.002
+    tolerances: tuple[float, ...] = (1e-8, 1e-4)
+    drake: tuple[str, ...] = ("sap", "similar", "lagged")
+    fd_half_width: tuple[tuple[float, float], tuple[float, float]] = ((0.05, 0.05), (0.05, 0.02))
+    fd_points: int = 9
+    repeats: int = 2
+    scene_config: dc.Config = field(default_factory=lambda: dc.Config(ball_duration=1.0))
+
+    @classmethod
+    def test_size(cls) -> Config:
+        """The reduced size CI runs: two steps, a coarser reference, one setting of each kind."""
+        return cls(
+            time_steps=(0.02, 0.01),
+            reference_time_step=0.002,
+            bs_mu=(1e-5,),
+            tolerances=(1e-4,),
+            drake=("sap",),
+            fd_points=5,
+            scene_config=dc.Config(ball_duration=0.5, box_duration=0.3),
+        )
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One row: who simulates, how, at which step."""
+
+    family: str  # "exact", "bs", "abs", "gaussian", or Drake's "sap", "similar", "lagged"
+    time_step: float
+    value: float | None = None  # mu (BS), tol (Exact), sigma (Gaussian)
+
+    @property
+    def ours(self) -> bool:
+        return self.family in ("exact", "bs", "abs", "gaussian")
+
+    @property
+    def label(self) -> str:
+        name = {
+            "exact": "ours Exact", "bs": "ours BS", "abs": "ours ABS",
+            "gaussian": "ours Gaussian-matched", "sap": "Drake SAP", "similar": "Drake Similar",
+            "lagged": "Drake Lagged",
+        }[self.family]  # fmt: skip
+        if self.family == "exact" and self.value is not None:
+            name += f" tol={self.value:g}"
+        elif self.family == "bs" and self.value is not None:
+            name += f" mu={self.value:g}"
+        return f"{name}, h={1e3 * self.time_step:g} ms"
+
+
+def settings(config: Config) -> list[Setting]:
+    out = []
+    for h in config.time_steps:
+        out.append(Setting("exact", h))
+        out += [Setting("exact", h, tol) for tol in config.tolerances]
+        out += [Setting("bs", h, mu) for mu in config.bs_mu]
+        out.append(Setting("abs", h))
+        out.append(Setting("gaussian", h, config.gaussian_sigma))
+        out += [Setting(name, h) for name in config.drake]
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# one rollout of a setting
+
+
+def _our_stepper(scene: str, s: Setting, config: Config):
+    """The scene's complementarity stepper under the setting's smoothing and tolerance."""
+    from drake_abs.multibody import build_scene_model
+
+    cfg = config.scene_config
+    i = 0 if scene == "box" else 1
+    scale = s.time_step / cfg.time_step  # mu is impulse x distance: scaled with h (module doc)
+    smoothing = {
+        "exact": {"kind": "exact"},
+        "bs": {"kind": "fixed", "value": (s.value or 0.0) * scale},
+        "abs": {"kind": "contact_aware", "mu_max": cfg.abs_mu_max[i] * scale,
+                "length": cfg.abs_length[i]},
+        "gaussian": {"kind": "gaussian_matched", "sigma": s.value},
+    }[s.family]  # fmt: skip
+    spec = replace(dc.our_scene(scene, s.time_step, cfg, "exact"), smoothing=smoothing)
+    options = {"tol": s.value} if s.family == "exact" and s.value is not None else {}
+    return build_scene_model(spec).stepper(gradient="total", **options)
+
+
+def _inputs(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, float]:
+    x0, u, duration, _ = dc.scene_setup(scene, config.scene_config)
+    return x0, u, duration
+
+
+def _selected(scene: str, dx_dx0: np.ndarray, dx_du: np.ndarray) -> np.ndarray:
+    """G: the final position's derivatives with respect to the scene's two inputs."""
+    spec = SCENE_INPUTS[scene]
+    cols = [dx_dx0[:, c] for c in spec["x0_columns"]]
+    if spec["push"]:
+        cols.append(dx_du[:, 0])
+    return np.stack(cols, axis=1)[list(spec["rows"])]
+
+
+def _best_of(repeats: int, fn):
+    """(the shortest of ``repeats`` wall-clock timings of ``fn()``, its first result)."""
+    best, first = np.inf, None
+    for _ in range(max(1, repeats)):
+        start = time.perf_counter()
+        value = fn()
+        best = min(best, time.perf_counter() - start)
+        first = value if first is None else first
+    return best, first
+
+
+def run_setting(scene: str, s: Setting, config: Config, x0, u, duration) -> dict:
+    """States, cost and G of one setting (one rollout in double, one with the gradient)."""
+    from drake_abs.engine import open_loop
+
+    n = int(round(duration / s.time_step))
+    if s.ours:
+        stepper = _our_stepper(scene, s, config)
+        U = np.tile(u, (n, 1)) if u.size else np.zeros((n, 0))
+        forward, traj = _best_of(config.repeats, lambda: open_loop(
+            stepper, x0, U, jacobians=False, on_unconverged="flag"))  # fmt: skip
+        with_gradient, grad = _best_of(config.repeats, lambda: open_loop(
+            stepper, x0, U, on_unconverged="flag"))  # fmt: skip
+        xs = traj.x[0]
+        G = _selected(scene, grad.dxH_dx0[0], grad.dxH_du[0].sum(axis=0))
+        unconverged = int((~traj.converged).sum())
+    else:
+        model = dc.build_drake_model(scene, s.family, s.time_step, config.scene_config)
+        runs = [dc.drake_rollout(model, x0, u, n) for _ in range(config.repeats)]
+        xs, forward = runs[0][0], n * min(r[1] for r in runs)
+        grads = [dc.drake_gradients(model, x0, u, n) for _ in range(config.repeats)]
+        g, with_gradient = grads[0], n * min(r["seconds"] for r in grads)
+        G = _selected(scene, g["dx_dx0"], g["dx_du"])
+        unconverged = 0
+    return {
+        "xs": xs,
+        "G": G,
+        "cost_s_per_s": forward / duration,
+        "gradient_cost_s_per_s": with_gradient / duration,
+        "unconverged_steps": unconverged,
+    }
+
+
+# ----------------------------------------------------------------------------------------------
+# accuracy
+
+
+class Measures:
+    """The reference of one scene and the errors of any rollout against it."""
+
+    def __init__(self, scene: str, config: Config, xs_ref: np.ndarray, G_ref: np.ndarray):
+        from drake_abs.multibody import build_scene_model
+
+        self.scene, self.config = scene, config
+        self.model = build_scene_model(dc.our_scene(scene, config.reference_time_step,
+                                                   config.scene_config, "exact"))  # fmt: skip
+        self.nq = self.model.plant.num_positions()
+        self.xs_ref = self._grid(xs_ref, config.reference_time_step)
+        self.E_ref = self.energy(self.xs_ref)
+        self.G_ref = G_ref
+
+    def _grid(self, xs: np.ndarray, h: float) -> np.ndarray:
+        stride = int(round(self.config.sample_period / h))
+        if abs(stride * h - self.config.sample_period) > 1e-12:
+            raise ValueError(
+                f"time step {h} must divide sample_period = {self.config.sample_period}"
+            )
+        return xs[::stride]
+
+    def energy(self, xs: np.ndarray) -> np.ndarray:
+        """Kinetic plus potential energy (J) of states (N, nx), by the scene's MultibodyPlant."""
+        plant = self.model.plant
+        context = plant.CreateDefaultContext()
+        out = np.empty(len(xs))
+        for k, x in enumerate(xs):
+            plant.SetPositionsAndVelocities(context, x)
+            out[k] = plant.CalcKineticEnergy(context) + plant.CalcPotentialEnergy(context)
+        return out
+
+    def errors(self, xs: np.ndarray, h: float, G: np.ndarray) -> dict:
+        grid = self._grid(xs, h)
+        rows = list(POSITION_ROWS[self.scene])
+        dist = np.linalg.norm(grid[:, rows] - self.xs_ref[:, rows], axis=1)
+        phi = self.model.contact_model.distances(xs[:, : self.nq])
+        return {
+            "trajectory_error_m": float(np.sqrt(np.mean(dist**2))),
+            "final_error_m": float(dist[-1]),
+            "penetration_m": float(max(0.0, -phi.min())),
+            "energy_error_J": float(np.max(np.abs(self.energy(grid) - self.E_ref))),
+            "gradient_error": float(np.linalg.norm(G - self.G_ref) / np.linalg.norm(self.G_ref)),
+        }
+
+
+def reference(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The reference states at ``reference_time_step``, G_ref by central differences of its
+    final position, and the reference's own errors at twice its step."""
+    from drake_abs.engine import open_loop
+
+    x0, u, duration = _inputs(scene, config)
+    spec = SCENE_INPUTS[scene]
+
+    def final_states(h: float, x, push) -> np.ndarray:
+        stepper = _our_stepper(scene, Setting("exact", h), config)
+        n = int(round(duration / h))
+        U = np.tile(push, (n, 1)) if push.size else np.zeros((n, 0))
+        traj = open_loop(stepper, x, U, jacobians=False, on_unconverged="raise")
+        return traj.x[0]
+
+    h = config.reference_time_step
+    xs = final_states(h, x0, u)
+    widths = config.fd_half_width[0 if scene == "box" else 1]
+    cols = []
+    for j, width in enumerate(widths):
+        deltas = np.linspace(-width, width, config.fd_points)
+        finals = []
+        for d in deltas:
+            x, push = x0.copy(), u.copy()
+            if j < len(spec["x0_columns"]):
+                x[spec["x0_columns"][j]] += d
+            else:
+                push = push + d
+            finals.append(final_states(h, x, push)[-1])
+        cols.append(np.polyfit(deltas, np.array(finals), 1)[0])  # the least-squares slope
+    G_ref = np.stack(cols, axis=1)[list(spec["rows"])]
+    coarse = final_states(2 * h, x0, u)
+    m = Measures(scene, config, xs, G_ref)
+    self_error = m.errors(coarse, 2 * h, G_ref)
+    self_error.pop("gradient_error")
+    return xs, G_ref, self_error
+
+
+# ----------------------------------------------------------------------------------------------
+# the experiment
+
+
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Run every setting on every scene; write summary.json, speed_accuracy.png and
+    speed_accuracy.md to ``out`` (default results/speed-accuracy); return the summary."""
+    config = config or Config()
+    out = Path(out or "results/speed-accuracy")
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {"config": asdict(config), "scenes": {}}
+    for scene in config.scenes:
+        xs_ref, G_ref, self_error = reference(scene, config)
+        analytic = dc.analytic_gradients(scene, config.scene_config)
+        measures = Measures(scene, config, xs_ref, G_ref)
+        x0, u, duration = _inputs(scene, config)
+        rows = []
+        for s in settings(config):
+            r = run_setting(scene, s, config, x0, u, duration)
+            rows.append({
+                "label": s.label, "family": s.family, "time_step": s.time_step, "value": s.value,
+                "cost_s_per_s": r["cost_s_per_s"],
+                "gradient_cost_s_per_s": r["gradient_cost_s_per_s"],
+                "unconverged_steps": r["unconverged_steps"],
+                **measures.errors(r["xs"], s.time_step, r["G"]),
+                "G": r["G"].tolist(),
+            })  # fmt: skip
+        summary["scenes"][scene] = {
+            "duration_s": duration,
+            "gradient_inputs": list(SCENE_INPUTS[scene]["names"]),
+            "reference": {
+                "time_step": config.reference_time_step,
+                "G": G_ref.tolist(),
+                "G_entries_vs_analytic": {
+                    name: {"reference": float(G_ref[i, j]), "analytic_rigid": analytic[name]}
+                    for name, i, j in SCENE_INPUTS[scene]["analytic"]
+                },  # fmt: skip
+                "self_error_at_twice_the_step": self_error,
+            },
+            "rows": rows,
+            "cheapest": cheapest(rows),
+        }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "speed_accuracy.md").write_text(report(summary))
+    plot(summary, out / "speed_accuracy.png")
+    return summary
+
+
+def cheapest(rows: list[dict]) -> dict:
+    """For each trajectory-error tier, the cheapest of ours and of Drake's that reach it (and
+    the cheapest gradient setting whose gradient error is below 10 %)."""
+    out = {}
+    for tier in _TIERS:
+        for who, ours in (("ours", True), ("drake", False)):
+            ok = [r for r in rows
+                  if (r["family"] in ("exact", "bs", "abs", "gaussian")) == ours
+                  and r["trajectory_error_m"] <= tier and r["unconverged_steps"] == 0]  # fmt: skip
+            best = min(ok, key=lambda r: r["cost_s_per_s"]) if ok else None
+            out[f"{who}@{tier:g}"] = None if best is None else {
+                k: best[k] for k in ("label", "cost_s_per_s", "trajectory_error_m",
+                                     "gradient_error", "gradient_cost_s_per_s")
+            }  # fmt: skip
+    return out
+
+
+def _fmt(x: float | None, spec: str = "{:.2g}") -> str:
+    return "-" if x is None else spec.format(x)
+
+
+def report(summary: dict) -> str:
+    lines = ["# Speed and accuracy", ""]
+    for scene, s in summary["scenes"].items():
+        ref = s["reference"]
+        lines += [
+            f"## {scene} ({s['duration_s']:g} s simulated; reference: ours Exact at "
+            f"h = {1e3 * ref['time_step']:g} ms, its own trajectory error at twice the step "
+            f"{_fmt(ref['self_error_at_twice_the_step']['trajectory_error_m'])} m)",
+            "",
+            "| trajectory error at most | ours: cheapest setting | s per simulated s | "
+            "gradient error | Drake: cheapest setting | s per simulated s | gradient error |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for tier in _TIERS:
+            a, b = s["cheapest"][f"ours@{tier:g}"], s["cheapest"][f"drake@{tier:g}"]
+            lines.append(
+                f"| {tier:g} m | {a['label'] if a else 'none'} | "
+                f"{_fmt(a and a['cost_s_per_s'])} | {_fmt(a and a['gradient_error'])} | "
+                f"{b['label'] if b else 'none'} | {_fmt(b and b['cost_s_per_s'])} | "
+                f"{_fmt(b and b['gradient_error'])} |"
+            )
+        lines += [
+            "",
+            "| setting | s per sim. s | with gradient | trajectory error (m) | "
+            "final error (m) | penetration (m) | energy error (J) | gradient error | "
+            "unconverged steps |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for r in s["rows"]:
+            lines.append(
+                f"| {r['label']} | {_fmt(r['cost_s_per_s'])} | "
+                f"{_fmt(r['gradient_cost_s_per_s'])} | {_fmt(r['trajectory_error_m'])} | "
+                f"{_fmt(r['final_error_m'])} | {_fmt(r['penetration_m'])} | "
+                f"{_fmt(r['energy_error_J'])} | {_fmt(r['gradient_error'])} | "
+                f"{r['unconverged_steps']} |"
+            )
+        lines.append("")
+    return "\n".join(lines)
+
+
+_STYLE = {"exact": ("C0", "o"), "bs": ("C1", "s"), "abs": ("C2", "^"), "gaussian": ("C4", "v"),
+          "sap": ("C3", "D"), "similar": ("C5", "P"), "lagged": ("C7", "X")}  # fmt: skip
+
+
+def plot(summary: dict, path: Path) -> None:
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = list(summary["scenes"])
+    measures = (
+        ("trajectory_error_m", "cost_s_per_s", "trajectory error (m)"),
+        ("gradient_error", "gradient_cost_s_per_s", "gradient error (relative)"),
+    )
+    fig, axes = plt.subplots(len(scenes), 2, figsize=(11, 4.2 * len(scenes)), squeeze=False)
+    for i, scene in enumerate(scenes):
+        for j, (err, cost, ylabel) in enumerate(measures):
+            ax = axes[i, j]
+            for family, (color, marker) in _STYLE.items():
+                rows = [r for r in summary["scenes"][scene]["rows"] if r["family"] == family]
+                if not rows:
+                    continue
+                h = np.array([r["time_step"] for r in rows])
+                ax.scatter([r[cost] for r in rows], [max(r[err], 1e-12) for r in rows],
+                           s=20 + 1.2e4 * h, c=color, marker=marker, alpha=0.75,
+                           label=_family_label(family))  # fmt: skip
+            ax.set(xscale="log", yscale="log", xlabel=f"{cost.replace('_', ' ')} (s per s)",
+                   ylabel=ylabel, title=f"{scene}: {ylabel} against cost")  # fmt: skip
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.grid(True, which="both", alpha=0.3)
+        axes[i, 0].legend(fontsize=7, title="marker size: time step", title_fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _family_label(family: str) -> str:
+    return Setting(family, 0.01).label.rsplit(",", 1)[0]
