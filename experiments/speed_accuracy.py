@@ -55,13 +55,52 @@ import numpy as np
 
 from drake_abs.experiments import drake_comparison as dc
 
-SCENE_INPUTS = {  # the final position's rows, and the inputs G differentiates with respect to
-    "box": {"rows": (0, 1), "x0_columns": (3,), "push": True, "names": ("vx_0", "push"),
+_SPECIAL = {  # the inputs G differentiates with respect to, and the analytic slopes' entries
+    "box": {"x0_columns": (3,), "push": True, "names": ("vx_0", "push"),
             "analytic": (("dx_T/dvx_0", 0, 0), ("dx_T/du", 0, 1))},
-    "ball": {"rows": (0, 1, 2), "x0_columns": (7, 2), "push": False, "names": ("vy_0", "z_0"),
+    "ball": {"x0_columns": (7, 2), "push": False, "names": ("vy_0", "z_0"),
              "analytic": (("dy_T/dvy_0", 1, 0), ("dy_T/dz_0", 1, 1))},
 }  # fmt: skip
-POSITION_ROWS = {"box": (0, 1), "ball": (0, 1, 2)}  # translational coordinates of q (m)
+
+
+def scene_inputs(scene: str) -> dict:
+    """What G is for a scene: ``rows``, the final position's coordinates (the plant's prismatic
+    joints: the translation of the base); ``x0_columns`` and ``push``, the inputs (box and ball
+    as above; an articulated scene: the base's initial horizontal and vertical speeds, the
+    first and last prismatic joints' velocities); their ``names``; the ``analytic`` entries."""
+    from drake_abs.multibody import build_scene_model
+
+    model = build_scene_model(_scene_spec(scene, None))
+    plant = model.plant
+    prismatic = [plant.get_joint(j) for j in plant.GetJointIndices()
+                 if plant.get_joint(j).type_name() == "prismatic"]  # fmt: skip
+    rows = tuple(j.position_start() for j in prismatic)
+    if scene in _SPECIAL:
+        return {"rows": rows, **_SPECIAL[scene]}
+    nq = plant.num_positions()
+    first, last = prismatic[0], prismatic[-1]
+    return {
+        "rows": rows,
+        "x0_columns": (nq + first.velocity_start(), nq + last.velocity_start()),
+        "push": False,
+        "names": (f"v_{first.name()}_0", f"v_{last.name()}_0"),
+        "analytic": (),
+    }
+
+
+def _scene_spec(scene: str, config: Config | None, time_step: float | None = None):
+    """The scene (box and ball: drake_comparison's, from ``config.scene_config``; otherwise the
+    shipped scene of that name), at ``time_step`` if given."""
+    from drake_abs.multibody import Scene
+
+    if scene in _SPECIAL:
+        cfg = config.scene_config if config is not None else dc.Config()
+        h = time_step or cfg.time_step
+        return dc.our_scene(scene, h, cfg, "exact")
+    spec = Scene.load(scene)
+    return replace(spec, time_step=time_step) if time_step else spec
+
+
 _TIERS = (1e-2, 1e-3, 1e-4)  # trajectory errors (m) the table asks for
 
 
@@ -70,7 +109,8 @@ class Config:
     """Settings (SI units). A larger mu or sigma is more smoothing.
 
     Attributes:
-        scenes: ``"box"`` and/or ``"ball"``.
+        scenes: ``"box"``, ``"ball"`` (drake_comparison's) and shipped articulated scenes
+            (unactuated: they drop and collapse).
         time_steps: the steps h every setting runs at (s); each must divide ``sample_period``.
         reference_time_step: the reference's step (s).
         sample_period: the common time grid of the errors (s).
@@ -82,10 +122,14 @@ class Config:
             perturbations of each input (box: m/s, N; ball: m/s, m).
         fd_points: perturbations per input (the least-squares slope through them).
         repeats: timed repeats of each rollout (the best is kept).
-        scene_config: the scenes' parameters (masses, friction, speeds, durations, ABS).
+        articulated_duration: simulated seconds of the articulated scenes.
+        articulated_half_width: the reference gradient's perturbation of their base speeds
+            (m/s).
+        scene_config: the box's and ball's parameters (masses, friction, speeds, durations,
+            ABS).
     """
 
-    scenes: tuple[str, ...] = ("box", "ball")
+    scenes: tuple[str, ...] = ("box", "ball", "hopper", "half_cheetah", "solo12_drop")
     time_steps: tuple[float, ...] = (0.02, 0.01, 0.005, 0.0025)
     reference_time_step: float = 0.0005
     sample_period: float = 0.02
@@ -96,6 +140,8 @@ class Config:
     fd_half_width: tuple[tuple[float, float], tuple[float, float]] = ((0.05, 0.05), (0.05, 0.02))
     fd_points: int = 9
     repeats: int = 2
+    articulated_duration: float = 0.5
+    articulated_half_width: float = 0.05
     scene_config: dc.Config = field(default_factory=lambda: dc.Config(ball_duration=1.0))
 
     @classmethod
@@ -108,6 +154,8 @@ class Config:
             tolerances=(1e-4,),
             drake=("sap",),
             fd_points=5,
+            scenes=("box", "ball", "hopper"),
+            articulated_duration=0.2,
             scene_config=dc.Config(ball_duration=0.5, box_duration=0.3),
         )
 
@@ -159,7 +207,7 @@ def _our_stepper(scene: str, s: Setting, config: Config):
     from drake_abs.multibody import build_scene_model
 
     cfg = config.scene_config
-    i = 0 if scene == "box" else 1
+    i = 1 if scene == "ball" else 0  # ABS as for the box, but for the ball
     scale = s.time_step / cfg.time_step  # mu is impulse x distance: scaled with h (module doc)
     smoothing = {
         "exact": {"kind": "exact"},
@@ -168,19 +216,25 @@ def _our_stepper(scene: str, s: Setting, config: Config):
                 "length": cfg.abs_length[i]},
         "gaussian": {"kind": "gaussian_matched", "sigma": s.value},
     }[s.family]  # fmt: skip
-    spec = replace(dc.our_scene(scene, s.time_step, cfg, "exact"), smoothing=smoothing)
+    spec = replace(_scene_spec(scene, config, s.time_step), smoothing=smoothing)
     options = {"tol": s.value} if s.family == "exact" and s.value is not None else {}
     return build_scene_model(spec).stepper(gradient="total", **options)
 
 
 def _inputs(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, float]:
-    x0, u, duration, _ = dc.scene_setup(scene, config.scene_config)
-    return x0, u, duration
+    """(x0, the constant input, simulated seconds): box and ball as drake_comparison; an
+    articulated scene from its initial state, unactuated."""
+    if scene in _SPECIAL:
+        x0, u, duration, _ = dc.scene_setup(scene, config.scene_config)
+        return x0, u, duration
+    from drake_abs.multibody import build_scene_model
+
+    model = build_scene_model(_scene_spec(scene, config))
+    return model.x0, np.zeros(model.contact_model.nu), config.articulated_duration
 
 
-def _selected(scene: str, dx_dx0: np.ndarray, dx_du: np.ndarray) -> np.ndarray:
+def _selected(spec: dict, dx_dx0: np.ndarray, dx_du: np.ndarray) -> np.ndarray:
     """G: the final position's derivatives with respect to the scene's two inputs."""
-    spec = SCENE_INPUTS[scene]
     cols = [dx_dx0[:, c] for c in spec["x0_columns"]]
     if spec["push"]:
         cols.append(dx_du[:, 0])
@@ -198,7 +252,19 @@ def _best_of(repeats: int, fn):
     return best, first
 
 
-def run_setting(scene: str, s: Setting, config: Config, x0, u, duration) -> dict:
+def _drake_model(scene: str, s: Setting, config: Config) -> dc.DrakeModel:
+    """Drake's discrete plant of the scene at the setting's step (box and ball as in
+    drake_comparison; an articulated scene as its generic twin, Drake's default material)."""
+    if scene in _SPECIAL:
+        return dc.build_drake_model(scene, s.family, s.time_step, config.scene_config)
+    from drake_abs.diagrams.drake_twin import make_drake_twin
+
+    spec = _scene_spec(scene, config, s.time_step)
+    twin = make_drake_twin(spec, s.family, sampled_outputs=False)
+    return dc.DrakeModel(s.family, s.family, "point", s.time_step, twin.diagram, twin.plant)
+
+
+def run_setting(scene: str, s: Setting, config: Config, x0, u, duration, spec: dict) -> dict:
     """States, cost and G of one setting (one rollout in double, one with the gradient)."""
     from drake_abs.engine import open_loop
 
@@ -211,15 +277,15 @@ def run_setting(scene: str, s: Setting, config: Config, x0, u, duration) -> dict
         with_gradient, grad = _best_of(config.repeats, lambda: open_loop(
             stepper, x0, U, on_unconverged="flag"))  # fmt: skip
         xs = traj.x[0]
-        G = _selected(scene, grad.dxH_dx0[0], grad.dxH_du[0].sum(axis=0))
+        G = _selected(spec, grad.dxH_dx0[0], grad.dxH_du[0].sum(axis=0))
         unconverged = int((~traj.converged).sum())
     else:
-        model = dc.build_drake_model(scene, s.family, s.time_step, config.scene_config)
+        model = _drake_model(scene, s, config)
         runs = [dc.drake_rollout(model, x0, u, n) for _ in range(config.repeats)]
         xs, forward = runs[0][0], n * min(r[1] for r in runs)
         grads = [dc.drake_gradients(model, x0, u, n) for _ in range(config.repeats)]
         g, with_gradient = grads[0], n * min(r["seconds"] for r in grads)
-        G = _selected(scene, g["dx_dx0"], g["dx_du"])
+        G = _selected(spec, g["dx_dx0"], g["dx_du"])
         unconverged = 0
     return {
         "xs": xs,
@@ -237,12 +303,12 @@ def run_setting(scene: str, s: Setting, config: Config, x0, u, duration) -> dict
 class Measures:
     """The reference of one scene and the errors of any rollout against it."""
 
-    def __init__(self, scene: str, config: Config, xs_ref: np.ndarray, G_ref: np.ndarray):
+    def __init__(self, scene: str, config: Config, xs_ref: np.ndarray, G_ref: np.ndarray,
+                 spec: dict):  # fmt: skip
         from drake_abs.multibody import build_scene_model
 
-        self.scene, self.config = scene, config
-        self.model = build_scene_model(dc.our_scene(scene, config.reference_time_step,
-                                                   config.scene_config, "exact"))  # fmt: skip
+        self.scene, self.config, self.spec = scene, config, spec
+        self.model = build_scene_model(_scene_spec(scene, config, config.reference_time_step))
         self.nq = self.model.plant.num_positions()
         self.xs_ref = self._grid(xs_ref, config.reference_time_step)
         self.E_ref = self.energy(self.xs_ref)
@@ -268,7 +334,7 @@ class Measures:
 
     def errors(self, xs: np.ndarray, h: float, G: np.ndarray) -> dict:
         grid = self._grid(xs, h)
-        rows = list(POSITION_ROWS[self.scene])
+        rows = list(self.spec["rows"])
         dist = np.linalg.norm(grid[:, rows] - self.xs_ref[:, rows], axis=1)
         phi = self.model.contact_model.distances(xs[:, : self.nq])
         return {
@@ -280,13 +346,12 @@ class Measures:
         }
 
 
-def reference(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, dict]:
+def reference(scene: str, config: Config, spec: dict) -> tuple[np.ndarray, np.ndarray, dict]:
     """The reference states at ``reference_time_step``, G_ref by central differences of its
     final position, and the reference's own errors at twice its step."""
     from drake_abs.engine import open_loop
 
     x0, u, duration = _inputs(scene, config)
-    spec = SCENE_INPUTS[scene]
 
     def final_states(h: float, x, push) -> np.ndarray:
         stepper = _our_stepper(scene, Setting("exact", h), config)
@@ -297,7 +362,11 @@ def reference(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, dict]
 
     h = config.reference_time_step
     xs = final_states(h, x0, u)
-    widths = config.fd_half_width[0 if scene == "box" else 1]
+    widths = (
+        config.fd_half_width[0 if scene == "box" else 1]
+        if scene in _SPECIAL
+        else (config.articulated_half_width,) * 2
+    )
     cols = []
     for j, width in enumerate(widths):
         deltas = np.linspace(-width, width, config.fd_points)
@@ -312,7 +381,7 @@ def reference(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, dict]
         cols.append(np.polyfit(deltas, np.array(finals), 1)[0])  # the least-squares slope
     G_ref = np.stack(cols, axis=1)[list(spec["rows"])]
     coarse = final_states(2 * h, x0, u)
-    m = Measures(scene, config, xs, G_ref)
+    m = Measures(scene, config, xs, G_ref, spec)
     self_error = m.errors(coarse, 2 * h, G_ref)
     self_error.pop("gradient_error")
     return xs, G_ref, self_error
@@ -330,13 +399,14 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     summary = {"config": asdict(config), "scenes": {}}
     for scene in config.scenes:
-        xs_ref, G_ref, self_error = reference(scene, config)
-        analytic = dc.analytic_gradients(scene, config.scene_config)
-        measures = Measures(scene, config, xs_ref, G_ref)
+        spec = scene_inputs(scene)
+        xs_ref, G_ref, self_error = reference(scene, config, spec)
+        analytic = dc.analytic_gradients(scene, config.scene_config) if scene in _SPECIAL else {}
+        measures = Measures(scene, config, xs_ref, G_ref, spec)
         x0, u, duration = _inputs(scene, config)
         rows = []
         for s in settings(config):
-            r = run_setting(scene, s, config, x0, u, duration)
+            r = run_setting(scene, s, config, x0, u, duration, spec)
             rows.append({
                 "label": s.label, "family": s.family, "time_step": s.time_step, "value": s.value,
                 "cost_s_per_s": r["cost_s_per_s"],
@@ -347,13 +417,14 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             })  # fmt: skip
         summary["scenes"][scene] = {
             "duration_s": duration,
-            "gradient_inputs": list(SCENE_INPUTS[scene]["names"]),
+            "gradient_inputs": list(spec["names"]),
+            "position_rows": list(spec["rows"]),
             "reference": {
                 "time_step": config.reference_time_step,
                 "G": G_ref.tolist(),
                 "G_entries_vs_analytic": {
                     name: {"reference": float(G_ref[i, j]), "analytic_rigid": analytic[name]}
-                    for name, i, j in SCENE_INPUTS[scene]["analytic"]
+                    for name, i, j in spec["analytic"]
                 },  # fmt: skip
                 "self_error_at_twice_the_step": self_error,
             },

@@ -20,6 +20,11 @@ from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.multibody.drake_dynamics import ContactModelBase
 
+#: how deep (m) a candidate left out of a step's LCP may end below the ground before the step
+#: is solved again with it (see ``ComplementarityStepper._repair``)
+REPAIR_TOL = 1e-6
+MAX_REPAIRS = 3
+
 
 class StepOverflowWarning(UserWarning):
     """A step from a finite state gave a non-finite next state or Jacobian (e.g. explicit
@@ -132,6 +137,30 @@ class ComplementarityStepper:
             active = phi <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
             active = np.ones((B, nc), dtype=bool)
+        out = self._solve(q, v, u, active, groups, jacobians, parameters)
+        if pruned:
+            self._repair(q, v, u, active, out, jacobians, parameters)
+        finite = np.isfinite(out["x_next"]).all(axis=1)
+        for key in ("dx_dx", "dx_du", "dx_dtheta") if jacobians else ():
+            if key in out:
+                finite &= np.isfinite(out[key]).all(axis=(1, 2))
+        if not finite.all():  # the dynamics overflowed (not the LCP): flag, never pass as valid
+            out["converged"] &= finite
+            warnings.warn(
+                f"{int((~finite).sum())} of {B} step(s) overflowed to a non-finite state or "
+                f"Jacobian (largest |x| in: {float(np.abs(x[~finite]).max()):.3g}); their "
+                "`converged` flags are False",
+                StepOverflowWarning,
+                stacklevel=2,
+            )
+        names = self.parameter_names if parameters else ()
+        return Step(active=active, theta_names=names, **out)
+
+    def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: bool) -> dict:
+        """The step of states (q, v, u) with the candidates ``active`` (B, nc) in the LCP, one
+        batched LCP per active set (``groups``: precomputed, or None): the output arrays."""
+        nq, nv, nu, nc = self.sizes
+        B = q.shape[0]
         out = {
             "x_next": np.empty((B, nq + nv)),
             "impulse": np.zeros((B, nc)),
@@ -169,21 +198,33 @@ class ComplementarityStepper:
                     f"columns after (q, v); the model has nu = {nu}"
                 )
             self._scatter(out, rows, idx, cone, r, jacobians)
-        finite = np.isfinite(out["x_next"]).all(axis=1)
-        for key in ("dx_dx", "dx_du", "dx_dtheta") if jacobians else ():
-            if key in out:
-                finite &= np.isfinite(out[key]).all(axis=(1, 2))
-        if not finite.all():  # the dynamics overflowed (not the LCP): flag, never pass as valid
-            out["converged"] &= finite
-            warnings.warn(
-                f"{int((~finite).sum())} of {B} step(s) overflowed to a non-finite state or "
-                f"Jacobian (largest |x| in: {float(np.abs(x[~finite]).max()):.3g}); their "
-                "`converged` flags are False",
-                StepOverflowWarning,
-                stacklevel=2,
-            )
-        names = self.parameter_names if parameters else ()
-        return Step(active=active, theta_names=names, **out)
+        return out
+
+    def _repair(self, q, v, u, active, out, jacobians: bool, parameters: bool) -> None:
+        """Pruning never lets a step pass through a contact: a candidate left out of the LCP
+        (beyond the activation distance) that the step would leave deeper than
+        :data:`REPAIR_TOL` below the ground (a fast impact closes more than the activation
+        distance within one step) joins the LCP, and that state's step is solved again. With no
+        such candidate, the pruned answer with zero impulse on the left-out candidates solves
+        the full LCP: pruning does not change an exact step. ``active`` and ``out`` are
+        updated in place."""
+        nq = self.sizes[0]
+        affine = self.model.affine
+        distances = affine.distances if affine is not None else self.model.distances
+        for _ in range(MAX_REPAIRS):
+            q_next = out["x_next"][:, :nq]
+            ok = np.isfinite(q_next).all(axis=1)
+            phi = np.full(active.shape, np.inf)
+            if ok.any():
+                phi[ok] = distances(q_next[ok])
+            missed = (phi < -REPAIR_TOL) & ~active
+            rows = np.flatnonzero(missed.any(axis=1))
+            if not rows.size:
+                return
+            active[rows] |= missed[rows]
+            sub = self._solve(q[rows], v[rows], u[rows], active[rows], None, jacobians, parameters)
+            for key, value in sub.items():
+                out[key][rows] = value
 
     def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
         """Write one group's step into the batch outputs (rows: a slice or row indices)."""

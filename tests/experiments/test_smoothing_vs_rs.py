@@ -97,12 +97,15 @@ def test_pushed_box_gradients_exact_rs_and_bs():
     np.testing.assert_array_equal(g_bs, g_bs2)
     assert conv.all()
     assert np.all(np.diff(g_bs) > 0) and 0.2 * slope < g_bs[10] < 0.8 * slope
-    # At mu = 1e-6 some pushes' frictional steps do not converge (a known solver weakness on
-    # this non-monotone LCP): their derivatives are NaN, never reported as values.
+    # mu = 1e-6: the frictional steps that the solver's default start lost are solved by its
+    # second starts; the gradient is a smooth sigmoid across the threshold
+    _, g6, conv6 = srs.push_gradients(CONFIG, ug, Fixed(1e-6))
+    assert conv6.all() and np.all(np.diff(g6) > 0)
+    # mu = 1e-4: some pushes' frictional steps still do not converge (this non-monotone LCP is
+    # attempted, not guaranteed): their derivatives are NaN, never reported as values
     with pytest.warns(UnconvergedStepWarning):
-        _, g6, conv6 = srs.push_gradients(CONFIG, ug, Fixed(1e-6))
-    assert not conv6.all() and np.isnan(g6[~conv6]).all() and np.isfinite(g6[conv6]).all()
-    assert np.all(np.diff(g6[conv6]) > 0)
+        _, g4, conv4 = srs.push_gradients(CONFIG, ug, Fixed(1e-4))
+    assert not conv4.all() and np.isnan(g4[~conv4]).all() and np.isfinite(g4[conv4]).all()
 
 
 def test_experiment_writes_its_results(tmp_path):

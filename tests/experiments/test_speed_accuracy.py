@@ -22,7 +22,11 @@ def summary(tmp_path_factory):
     result = sa.run(sa.Config.test_size(), out)
     for name in ("summary.json", "speed_accuracy.md", "speed_accuracy.png"):
         assert (out / name).stat().st_size > 100, name
-    assert json.loads((out / "summary.json").read_text())["scenes"].keys() == {"box", "ball"}
+    assert json.loads((out / "summary.json").read_text())["scenes"].keys() == {
+        "box",
+        "ball",
+        "hopper",
+    }
     return result
 
 

@@ -24,6 +24,7 @@ from drake_abs.contact.contact_lcp import contact_step
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody import ComplementarityStepper
 from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.posture import STANDING_GAINS, standing_controller, total_mass
 from drake_abs.multibody.scene import Scene
 
 G = 9.81
@@ -41,10 +42,6 @@ SIZES = {
 @functools.cache
 def scene_model(name):
     return build_scene_model(Scene.from_yaml(SCENES_DIR / f"{name}.yaml"))
-
-
-def total_mass(sm):
-    return sm.plant.CalcTotalMass(sm.plant.CreateDefaultContext())
 
 
 def test_every_shipped_scene_loads_and_builds():
@@ -77,47 +74,13 @@ def test_solo12_is_the_floating_example_robot_data_robot_with_twelve_actuators()
 # --- rollouts ----------------------------------------------------------------------------------
 
 
-def actuated_indices(plant):
-    """Position and velocity index of each actuator's (one-degree-of-freedom) joint."""
-    joints = [plant.get_joint_actuator(a).joint() for a in plant.GetJointActuatorIndices()]
-    return (
-        np.array([j.position_start() for j in joints], int),
-        np.array([j.velocity_start() for j in joints], int),
-    )
-
-
-def standing_controller(sm, feet, kp, kd):
-    """u(x) = u_ff + kp (q0 - q) - kd v on the actuated joints, with u_ff the torques that hold
-    the initial posture when the feet (contact indices) carry equal shares of the weight."""
-    plant = sm.plant
-    nq, nu = plant.num_positions(), plant.num_actuators()
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, sm.q0)
-    tau_g = plant.CalcGravityGeneralizedForces(context)
-    quant = sm.contact_model.quantities(
-        sm.q0[None], sm.v0[None], np.zeros((1, nu)), np.array(feet), derivatives=False
-    )
-    support = quant.Jn[0].T @ np.full(len(feet), total_mass(sm) * G / len(feet))
-    B = plant.MakeActuationMatrix()
-    u_ff = np.linalg.lstsq(B, -(tau_g + support), rcond=None)[0]
-    assert np.allclose(B @ u_ff + tau_g + support, 0, atol=1e-9)  # the posture is in balance
-    qi, vi = actuated_indices(plant)
-    kp, kd, q_ref = np.asarray(kp, float), np.asarray(kd, float), sm.q0[qi]
-    return lambda x: u_ff + kp * (q_ref - x[qi]) - kd * x[nq + vi]
-
-
 def controller(name, sm):
     if name == "ball_throw":
         return lambda x: np.zeros(0)
     if name == "box_push":
         return lambda x: np.array([2.0])  # N, less than friction's 0.5 m g = 4.9 N
-    if name == "hopper":  # hip (N m/rad, N m s/rad), leg (N/m, N s/m)
-        return standing_controller(sm, [0], kp=[50.0, 500.0], kd=[2.0, 40.0])
-    if name == "half_cheetah":  # thigh, shin, foot per leg; the 0.4 kg foot limits the gains
-        return standing_controller(sm, [0, 1], kp=[100.0, 100.0, 10.0] * 2, kd=[1.0, 1.0, 0.05] * 2)
-    if name == "solo12_drop":  # its lower legs weigh 31 g: h = 5 ms and light gains
-        return standing_controller(sm, [0, 1, 2, 3], kp=[5.0] * 12, kd=[0.1] * 12)
-    raise KeyError(name)
+    feet, kp, kd = STANDING_GAINS[name]  # hopper, half_cheetah, solo12_drop
+    return standing_controller(sm, feet, kp, kd)[0]
 
 
 STEPS = {"ball_throw": 60, "box_push": 60, "hopper": 100, "half_cheetah": 100, "solo12_drop": 120}

@@ -1,0 +1,177 @@
+"""How often a contact step's LCP fails to converge, per scene and smoothing, over noisy
+closed-loop rollouts of at least 10^4 steps each.
+
+Scenes and controllers (every rollout seeded):
+
+- **solo12_drop**: the quadruped dropped onto its feet under a joint PD controller that holds
+  the initial posture (standing) or swings the hips and knees in a trot-like pattern
+  (stepping), with Gaussian torque noise;
+- **hopper** and **half_cheetah**: planar legged robots under a joint PD holding the initial
+  posture, with torque noise;
+- **box_push**: the planar box pushed with random forces from random sliding states.
+
+Smoothing: Exact, Fixed(mu) for mu from 1e-8 to 1e-2, ContactAware (the scene's, or
+mu_max 1e-3, length 0.02), GaussianMatched(sigma = 2 mm).
+
+Each pair runs twice from the same seed: with the solver's default start alone ("before") and
+with its second start (``drake_abs.lcp.ipm.SECOND_START``; "after", the default). For each, it
+prints the steps that solved an LCP, the fraction unconverged, the iterations (median, p99),
+and every remaining failure of the "after" run (scene, smoothing, rollout, step). Target: at
+most 1 in 10^4 steps unconverged. A step that fails is not taken forward: that rollout starts
+again from a fresh initial state.
+
+Usage: ``python benchmarks/bench_convergence.py [--steps N] [--scenes ...] [--json FILE]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+import warnings
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_abs/__init__
+
+import numpy as np
+
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched
+from drake_abs.lcp import ipm
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.multibody import Scene, build_scene_model
+from drake_abs.multibody.posture import STANDING_GAINS, standing_controller
+from drake_abs.multibody.stepper import StepOverflowWarning
+
+SMOOTHINGS = {
+    "exact": Exact(),
+    **{f"fixed {mu:g}": Fixed(mu) for mu in (1e-8, 1e-6, 1e-4, 1e-2)},
+    "contact_aware": None,  # the scene's own, or the default below
+    "gaussian": GaussianMatched(0.002),
+}
+BATCH = 16
+TARGET = 1e-4
+
+
+def _controller(name: str, model, rng: np.random.Generator):
+    """u(t, x) (B, nu) for the scene: the shipped posture-holding feed-forward + PD
+    (``drake_abs.multibody.posture``), plus for solo12 "stepping" a trot-like swing of the
+    reference (diagonal legs together, 0.3 rad at 2 Hz on the hip and knee pitch), with
+    Gaussian torque noise of 5 % of the PD's torque scale; box: random pushes."""
+    nu = model.contact_model.nu
+    if name == "box_push":
+        return lambda t, x: rng.uniform(-8.0, 8.0, (len(x), nu))
+    base = name.replace("_standing", "").replace("_stepping", "")
+    feet, kp, kd = STANDING_GAINS[base]
+    hold, u_ff = standing_controller(model, feet, kp, kd)
+    kp = np.broadcast_to(np.asarray(kp, float), (nu,))
+    noise = 0.05 * np.maximum(np.abs(u_ff), kp * 0.1)
+    swing = np.zeros(nu)
+    if name.endswith("stepping"):  # solo12: per leg (HAA, HFE, KFE); legs FL, FR, HL, HR
+        swing = np.tile([0.0, 0.3, 0.3], 4)
+    phase = np.repeat([0.0, np.pi, np.pi, 0.0], 3)
+
+    def u(t, x):
+        drive = kp * swing * np.sin(2 * np.pi * 2.0 * t + phase)
+        return hold(x) + drive + noise * rng.standard_normal((len(x), nu))
+
+    return u
+
+
+def _initial_states(name: str, model, rng: np.random.Generator, B: int) -> np.ndarray:
+    x = np.tile(model.x0, (B, 1))
+    nq = model.contact_model.nq
+    if name == "box_push":  # sliding at random speeds, slightly pitched or lifted
+        x[:, nq] = rng.uniform(-2.0, 2.0, B)
+        x[:, 1] += rng.uniform(0.0, 0.02, B)
+    else:
+        x[:, nq:] += 0.1 * rng.standard_normal((B, model.contact_model.nv))
+    return x
+
+
+def run_pair(scene_name: str, smoothing_name: str, steps: int, seed: int) -> dict:
+    base = scene_name.replace("_standing", "").replace("_stepping", "")
+    scene = Scene.load(base)
+    model = build_scene_model(scene)
+    smoothing = SMOOTHINGS[smoothing_name]
+    if smoothing is None:
+        smoothing = scene.smoothing_policy()
+        if not isinstance(smoothing, ContactAware):
+            smoothing = ContactAware(1e-3, 0.02)
+    stepper = model.stepper(smoothing=smoothing)
+    rng = np.random.default_rng(seed)
+    u_of = _controller(scene_name, model, rng)
+    horizon = int(np.ceil(steps / BATCH))
+    x = _initial_states(scene_name, model, rng, BATCH)
+    solved = unconverged = 0
+    iterations, failures = [], []
+    start = time.perf_counter()
+    for t in range(horizon):
+        if t and t % 200 == 0:  # a new episode every 200 steps: the scene's own start again
+            x = _initial_states(scene_name, model, rng, BATCH)
+        r = stepper.step(x, u_of(t * scene.time_step, x), jacobians=False)
+        lcp = r.iterations > 0
+        solved += int(lcp.sum())
+        bad = np.flatnonzero(~r.converged)
+        unconverged += bad.size
+        failures += [{"rollout": int(b), "step": t} for b in bad]
+        iterations += r.iterations[lcp].tolist()
+        x = r.x_next
+        if bad.size:  # a failed step is not taken forward: that rollout starts again
+            x[bad] = _initial_states(scene_name, model, rng, bad.size)
+    it = np.array(iterations) if iterations else np.zeros(1)
+    return {
+        "scene": scene_name, "smoothing": smoothing_name, "steps": horizon * BATCH,
+        "lcp_steps": solved, "unconverged": unconverged,
+        "median_iterations": float(np.median(it)), "p99_iterations": float(np.percentile(it, 99)),
+        "seconds": time.perf_counter() - start, "failures": failures[:20],
+    }  # fmt: skip
+
+
+SCENES = ("solo12_drop_standing", "solo12_drop_stepping", "hopper", "half_cheetah", "box_push")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=10_000, help="steps per scene and smoothing")
+    parser.add_argument("--scenes", nargs="*", default=list(SCENES))
+    parser.add_argument("--smoothings", nargs="*", default=list(SMOOTHINGS))
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted below
+    warnings.simplefilter("ignore", StepOverflowWarning)
+    rows = []
+    print(f"{'scene':22s} {'smoothing':14s} | before: {'unconverged':>11s} {'iter med':>8s} "
+          f"{'p99':>5s} | after: {'unconverged':>11s} {'iter med':>8s} {'p99':>5s} "
+          f"(of LCP steps; target <= {TARGET:g})")  # fmt: skip
+    for i, scene in enumerate(args.scenes):
+        for j, smoothing in enumerate(args.smoothings):
+            pair = {}
+            for when, second in (("before", False), ("after", True)):
+                ipm.SECOND_START = second
+                pair[when] = run_pair(scene, smoothing, args.steps, seed=1000 * i + j)
+            ipm.SECOND_START = True
+            b, a = pair["before"], pair["after"]
+            rows.append({"scene": scene, "smoothing": smoothing, **{
+                f"{when}_{k}": v for when, r in pair.items() for k, v in r.items()
+                if k not in ("scene", "smoothing")}})  # fmt: skip
+            fb, fa = (r["unconverged"] / max(r["lcp_steps"], 1) for r in (b, a))
+            print(f"{scene:22s} {smoothing:14s} | {fb:19.2e} {b['median_iterations']:8.0f} "
+                  f"{b['p99_iterations']:5.0f} | {fa:18.2e} {a['median_iterations']:8.0f} "
+                  f"{a['p99_iterations']:5.0f}" + ("" if fa <= TARGET else "  FAIL"),
+                  flush=True)  # fmt: skip
+    worst = max(r["after_unconverged"] / max(r["after_lcp_steps"], 1) for r in rows)
+    print(f"worst unconverged fraction {worst:.2e}: {'PASS' if worst <= TARGET else 'FAIL'}")
+    for r in rows:
+        for f in r["after_failures"]:
+            print(f"  unconverged: {r['scene']}, {r['smoothing']}, rollout {f['rollout']}, "
+                  f"step {f['step']}")  # fmt: skip
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps({"rows": rows, "target": TARGET,
+                                               "worst": worst}, indent=2))  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,73 @@
+"""A posture-holding joint controller for a scene's robot: feed-forward torques that balance
+the initial posture on its feet, plus a PD law on the actuated joints (docs/math.md section 6).
+
+    u(x) = u_ff + kp (q_ref - q_a) - kd v_a
+
+with ``q_a``, ``v_a`` the actuated joints' positions and velocities, ``q_ref`` their initial
+values, and ``u_ff`` the torques for which gravity, the actuation and equal normal forces at the
+given feet (the robot's weight shared among them) are in balance at the initial posture. Batched
+over states. Shipped gains per scene in :data:`STANDING_GAINS` (light robots, such as solo12's
+31 g lower legs, need light gains: the PD is explicit in the time step).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from drake_abs.multibody.builder import SceneModel
+
+GRAVITY = 9.81  # m/s^2
+
+#: feet (contact indices) and (kp, kd) per actuated joint, for the shipped robots standing
+STANDING_GAINS: dict[str, tuple[list[int], list[float], list[float]]] = {
+    "hopper": ([0], [50.0, 500.0], [2.0, 40.0]),  # hip (N m/rad), leg (N/m); N m s/rad, N s/m
+    "half_cheetah": ([0, 1], [100.0, 100.0, 10.0] * 2, [1.0, 1.0, 0.05] * 2),  # 0.4 kg feet
+    "solo12_drop": ([0, 1, 2, 3], [5.0] * 12, [0.1] * 12),  # 31 g lower legs, h = 5 ms
+}
+
+
+def total_mass(model: SceneModel) -> float:
+    """The robot's mass (kg)."""
+    return model.plant.CalcTotalMass(model.plant.CreateDefaultContext())
+
+
+def actuated_indices(model: SceneModel) -> tuple[np.ndarray, np.ndarray]:
+    """Position and velocity index of each actuator's (one-degree-of-freedom) joint."""
+    plant = model.plant
+    joints = [plant.get_joint_actuator(a).joint() for a in plant.GetJointActuatorIndices()]
+    return (
+        np.array([j.position_start() for j in joints], int),
+        np.array([j.velocity_start() for j in joints], int),
+    )
+
+
+def standing_controller(
+    model: SceneModel, feet, kp, kd
+) -> tuple[Callable[[np.ndarray], np.ndarray], np.ndarray]:
+    """``(u, u_ff)``: the controller ``u(x)`` (x (nx,) or (B, nx) -> (nu,) or (B, nu)) that holds
+    the initial posture, and its feed-forward torques. ``feet``: contact indices that carry the
+    weight; ``kp``, ``kd``: per actuated joint (scalars broadcast)."""
+    plant = model.plant
+    nq, nu = plant.num_positions(), plant.num_actuators()
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, model.q0)
+    tau_g = plant.CalcGravityGeneralizedForces(context)
+    feet = np.asarray(feet, int)
+    quant = model.contact_model.quantities(
+        model.q0[None], model.v0[None], np.zeros((1, nu)), feet, derivatives=False
+    )
+    support = quant.Jn[0].T @ np.full(feet.size, total_mass(model) * GRAVITY / feet.size)
+    B = plant.MakeActuationMatrix()
+    u_ff = np.linalg.lstsq(B, -(tau_g + support), rcond=None)[0]
+    if not np.allclose(B @ u_ff + tau_g + support, 0.0, atol=1e-9):
+        raise ValueError("the initial posture cannot be balanced by the actuators on these feet")
+    qi, vi = actuated_indices(model)
+    kp, kd, q_ref = np.asarray(kp, float), np.asarray(kd, float), model.q0[qi]
+
+    def u(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        return u_ff + kp * (q_ref - x[..., qi]) - kd * x[..., nq + vi]
+
+    return u, u_ff
