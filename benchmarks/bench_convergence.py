@@ -66,10 +66,10 @@ def _controller(name: str, model, rng: np.random.Generator):
     hold, u_ff = standing_controller(model, feet, kp, kd)
     kp = np.broadcast_to(np.asarray(kp, float), (nu,))
     noise = 0.05 * np.maximum(np.abs(u_ff), kp * 0.1)
-    swing = np.zeros(nu)
+    swing, phase = np.zeros(nu), np.zeros(nu)
     if name.endswith("stepping"):  # solo12: per leg (HAA, HFE, KFE); legs FL, FR, HL, HR
         swing = np.tile([0.0, 0.3, 0.3], 4)
-    phase = np.repeat([0.0, np.pi, np.pi, 0.0], 3)
+        phase = np.repeat([0.0, np.pi, np.pi, 0.0], 3)
 
     def u(t, x):
         drive = kp * swing * np.sin(2 * np.pi * 2.0 * t + phase)

@@ -208,19 +208,17 @@ class ComplementarityStepper:
         such candidate, the pruned answer with zero impulse on the left-out candidates solves
         the full LCP: pruning does not change an exact step. ``active`` and ``out`` are
         updated in place."""
+        if active.all():  # nothing was left out
+            return
         nq = self.sizes[0]
         affine = self.model.affine
         distances = affine.distances if affine is not None else self.model.distances
         for _ in range(MAX_REPAIRS):
-            q_next = out["x_next"][:, :nq]
-            ok = np.isfinite(q_next).all(axis=1)
-            phi = np.full(active.shape, np.inf)
-            if ok.any():
-                phi[ok] = distances(q_next[ok])
+            phi = distances(out["x_next"][:, :nq])  # NaN for a non-finite state: compares False
             missed = (phi < -REPAIR_TOL) & ~active
-            rows = np.flatnonzero(missed.any(axis=1))
-            if not rows.size:
+            if not missed.any():
                 return
+            rows = np.flatnonzero(missed.any(axis=1))
             active[rows] |= missed[rows]
             sub = self._solve(q[rows], v[rows], u[rows], active[rows], None, jacobians, parameters)
             for key, value in sub.items():
