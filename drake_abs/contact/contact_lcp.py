@@ -43,8 +43,6 @@ respect to q, v and u come from the caller (e.g. Drake AutoDiffXd).
 
 from __future__ import annotations
 
-import dataclasses
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -53,12 +51,8 @@ import numpy as np
 
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
-from drake_abs.lcp.ipm import (
-    LCPConvergenceWarning,
-    LCPResult,
-    check_solver_options,
-    solve_lcp_trusted,
-)
+from drake_abs.contact.unconverged import exact_fallback
+from drake_abs.lcp.ipm import LCPResult, check_solver_options, solve_lcp_trusted
 
 #: Solver defaults for contact steps. Sticking makes the linearised-cone LCP degenerate
 #: (beta_j = xi_j = 0) and its friction split non-unique (opposing directions can carry equal,
@@ -349,7 +343,7 @@ def contact_step(
     options.setdefault("tol", 1e-12)
     check_solver_options(options["tol"], options["max_iterations"], options["exact_tol"])
     lcp = solve_lcp_trusted(F, z, mu, jacobians=jac, strict=strict, **options)
-    lcp = _exact_fallback(F, z, mu, lcp, jac, options)
+    lcp = exact_fallback(F, z, mu, lcp, jacobians=jac, **options)
     lam = lcp.lam
     lam_v = lam[:, : nc + nt]
     G = np.concatenate([quant.Jn, quant.Jt], axis=1)
@@ -430,38 +424,6 @@ def _free_step(
         if par is not None:
             jac.update(dx_dtheta=dx[:, :, P:], dlam_dtheta=np.zeros((B, 0, dx.shape[-1] - P)))
     return ContactStepResult(q_next, v_next, empty, empty, np.ones(B, dtype=bool), lcp=None, **jac)
-
-
-def _exact_fallback(F, z, mu, lcp: LCPResult, jacobians: bool, options: dict) -> LCPResult:
-    """A smoothed solve that did not converge never moves the state by its unconverged iterate:
-    where the exact (mu = 0) problem of the same step converges, its solution (hard contact, a
-    physically valid step) replaces the iterate. The step stays flagged ``converged = False``
-    (it is not the smoothing asked for) and a warning says how many were replaced."""
-    bad = np.flatnonzero(~lcp.converged & np.any(mu > 0, axis=1))
-    if not bad.size:
-        return lcp
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", LCPConvergenceWarning)
-        exact = solve_lcp_trusted(F[bad], z[bad], np.zeros_like(mu[bad]), jacobians=jacobians,
-                                  **options)  # fmt: skip
-    rows = bad[exact.converged]
-    if not rows.size:
-        return lcp
-    fields = {}
-    for name in ("lam", "slack", "mu", "mu_target", "dlam_dq", "dlam_dmu"):
-        value = getattr(lcp, name)
-        if value is not None:
-            value = value.copy()
-            value[rows] = getattr(exact, name)[exact.converged]
-            fields[name] = value
-    warnings.warn(
-        f"{rows.size} smoothed contact step(s) did not converge; they use the exact (mu = 0) "
-        "solution of the same step instead of the unconverged iterate and stay flagged "
-        "converged = False",
-        LCPConvergenceWarning,
-        stacklevel=4,
-    )
-    return dataclasses.replace(lcp, **fields)
 
 
 def expand_mu(mu_n: np.ndarray, cone: FrictionCone, h: float) -> np.ndarray:

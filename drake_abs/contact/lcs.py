@@ -17,6 +17,7 @@ import numpy as np
 from drake_abs._validation import as_finite_array, check_shape
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
+from drake_abs.contact.unconverged import exact_fallback
 from drake_abs.lcp.ipm import (
     SOLVER_DEFAULTS,
     OnBadMatrix,
@@ -154,10 +155,12 @@ class LCS:
                 f"smoothing {smoothing!r} must return a finite mu >= 0 of shape {z.shape}; got "
                 f"shape {mu.shape}, min {float(np.min(mu)) if mu.size else None}"
             )
+        monotone = self._step_check == "trusted"
+        options = self.solver_options
         lcp = solve_lcp_trusted(
-            self.F, z, mu, jacobians=jacobians, strict=strict,
-            monotone=self._step_check == "trusted", **self.solver_options,
-        )  # fmt: skip
+            self.F, z, mu, jacobians=jacobians, strict=strict, monotone=monotone, **options
+        )
+        lcp = exact_fallback(self.F, z, mu, lcp, jacobians=jacobians, monotone=monotone, **options)
         x_next = X @ self.A.T + U @ self.B.T + lcp.lam @ self.C.T + self.c
         jac = {}
         if jacobians:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from drake_abs import ContactAware, LcsStepper, open_loop, point_mass_lcs
+from drake_abs.contact.smoothing import SmoothingPolicy
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 
@@ -52,3 +53,41 @@ def test_flag_keeps_them_and_raise_refuses():
             )
     with pytest.raises(ValueError, match="on_unconverged"):
         open_loop(LcsStepper(_starved()), X0, U, on_unconverged="skip")
+
+
+class _RowMu(SmoothingPolicy):
+    """A constant mu per LCP row (the contact step's normal and friction rows)."""
+
+    is_constant = True
+
+    def __init__(self, rows):
+        self.rows = np.asarray(rows, float)
+
+    def mu(self, z, F):
+        return np.broadcast_to(self.rows, np.shape(z)).copy()
+
+
+def test_an_lcs_step_that_does_not_converge_takes_the_exact_step(monkeypatch):
+    """The same fallback as the rigid-body step: a solo12 standing step's frictional LCP (24
+    rows, mu 1e-4 on the normal rows and 1e-2 on the friction rows), which the default start
+    alone does not solve, as an LCS whose state records the impulse. The unconverged step's
+    next state is the exact step's (flagged), not the unconverged iterate."""
+    from pathlib import Path
+
+    from drake_abs import LCS, Exact
+    from drake_abs.lcp import ipm
+
+    data = np.load(Path(__file__).with_name("solo12_standing_lcp.npz"))
+    d = data["z"].size
+    lcs = LCS(A=np.eye(d), B=np.zeros((d, 1)), C=np.eye(d), c=np.zeros(d), D=np.zeros((d, d)),
+              E=np.zeros((d, 1)), F=data["F"], d=data["z"], on_bad_matrix="attempt")  # fmt: skip
+    x, u = np.zeros(d), np.zeros(1)
+    monkeypatch.setattr(ipm, "SECOND_START", False)  # the default start alone fails here
+    with pytest.warns(LCPConvergenceWarning, match="use the exact"):
+        smoothed = lcs.step(x, u, _RowMu(data["mu"]))
+    exact = lcs.step(x, u, Exact())
+    assert not smoothed.converged and exact.converged
+    # the same exact solve, reached through the fallback and directly
+    np.testing.assert_allclose(smoothed.x_next, exact.x_next, rtol=1e-12, atol=1e-15)
+    monkeypatch.setattr(ipm, "SECOND_START", True)  # with the second starts it converges
+    assert lcs.step(x, u, _RowMu(data["mu"])).converged
