@@ -113,6 +113,7 @@ class ContactModelBase(ABC):
                 else plant.GetBodyByName(c.body)
             )
             self._bodies_d.append(body)
+        self.affine = None  # set below, once the provider can evaluate its quantities
         self._setup()
         #: the affine quantities of a plant with prismatic joints only (None otherwise, or when
         #: set to None by hand to force the general path): see multibody/affine_dynamics.py
@@ -230,9 +231,16 @@ class ContactModelBase(ABC):
     def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         """The quantities of one state (the fields of StepQuantities but q and v)."""
 
-    @abstractmethod
     def distances(self, q: np.ndarray) -> np.ndarray:
-        """Signed distances (B, nc) in m of every contact candidate, in double."""
+        """Signed distances (B, nc) in m of every contact candidate, in double (affine in q, and
+        evaluated so, for a plant with :attr:`affine` quantities)."""
+        if self.affine is not None:
+            return self.affine.distances(q)
+        return self._distances(q)
+
+    @abstractmethod
+    def _distances(self, q: np.ndarray) -> np.ndarray:
+        """The provider's signed distances (B, nc), by its kinematics."""
 
 
 class MultibodyContactModel(ContactModelBase):
@@ -254,8 +262,7 @@ class MultibodyContactModel(ContactModelBase):
             np.array([AutoDiffXd(float(i == j)) for i in range(self.nv)]) for j in range(self.nv)
         ]
 
-    def distances(self, q: np.ndarray) -> np.ndarray:
-        """Signed distances (B, nc) in m of every contact candidate, in double."""
+    def _distances(self, q: np.ndarray) -> np.ndarray:
         plant, ctx = self.plant, self._context
         out = np.empty((len(q), len(self.contacts)))
         for b, qb in enumerate(q):

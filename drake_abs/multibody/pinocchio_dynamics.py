@@ -165,7 +165,7 @@ class PinocchioContactModel(ContactModelBase):
             out[idx] = p_J @ X.rotation.T + X.translation
         return out
 
-    def distances(self, q: np.ndarray) -> np.ndarray:
+    def _distances(self, q: np.ndarray) -> np.ndarray:
         model, data = self.pin_model, self.pin_data
         out = np.empty((len(q), len(self.contacts)))
         for b, qb in enumerate(q):
@@ -180,7 +180,10 @@ class PinocchioContactModel(ContactModelBase):
         return self._centres(), self.pin_data.J.copy()
 
     def quantities_within(self, q, v, u, distance, *, derivatives=True):
-        """As the base class, with one kinematics pass for the distances and the quantities."""
+        """As the base class, with one kinematics pass for the distances and the quantities
+        (the base class's, for a plant with affine quantities)."""
+        if self.affine is not None:
+            return super().quantities_within(q, v, u, distance, derivatives=derivatives)
         kinematics = self._kinematics(np.asarray(q[0], float))
         phi = kinematics[0] @ self.normal - self._radius - self.ground.height
         active = np.flatnonzero(phi <= distance)

@@ -124,8 +124,7 @@ class ComplementarityStepper:
         q, v = x[:, :nq], x[:, nq:]
         pruned = np.isfinite(self.activation_distance)
         groups = None  # (rows, active contact indices, quantities or None) per active set
-        affine = self.model.affine
-        if B == 1 and pruned and affine is None:  # one state: the provider shares kinematics
+        if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
             idx, quant = self.model.quantities_within(
                 q, v, u, self.activation_distance, derivatives=jacobians
             )
@@ -133,8 +132,7 @@ class ComplementarityStepper:
             active[0, idx] = True
             groups = [(slice(None), idx, quant)]
         elif pruned:
-            phi = affine.distances(q) if affine is not None else self.model.distances(q)
-            active = phi <= self.activation_distance
+            active = self.model.distances(q) <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
             active = np.ones((B, nc), dtype=bool)
         out = self._solve(q, v, u, active, groups, jacobians, parameters)
@@ -211,10 +209,10 @@ class ComplementarityStepper:
         if active.all():  # nothing was left out
             return
         nq = self.sizes[0]
-        affine = self.model.affine
-        distances = affine.distances if affine is not None else self.model.distances
         for _ in range(MAX_REPAIRS):
-            phi = distances(out["x_next"][:, :nq])  # NaN for a non-finite state: compares False
+            phi = self.model.distances(
+                out["x_next"][:, :nq]
+            )  # NaN for a non-finite state: compares False
             missed = (phi < -REPAIR_TOL) & ~active
             if not missed.any():
                 return
