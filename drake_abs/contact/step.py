@@ -81,13 +81,19 @@ def contact_free_step(
     dx_dx: np.ndarray | None = None,
     dx_du: np.ndarray | None = None,
 ) -> Step:
-    """The record of a step without contact (e.g. a flying quadcopter, a linear model): every
-    step converged, no impulses. x_next has the batch shape S + (nx,)."""
+    """The record of a step without contact (e.g. a flying quadcopter, a linear model): no
+    impulses; ``converged`` says the step is usable, i.e. its next state and Jacobians are
+    finite (an overflowing model is flagged, never passed as valid). x_next has the batch shape
+    S + (nx,)."""
     x_next = np.asarray(x_next)
     batch = x_next.shape[:-1]
+    usable = np.isfinite(x_next).all(axis=-1)
+    for J in (dx_dx, dx_du):
+        if J is not None:
+            usable &= np.isfinite(J).all(axis=(-2, -1))
     return Step(
         x_next=x_next,
-        converged=np.ones(batch, dtype=bool),
+        converged=usable,
         iterations=np.zeros(batch, dtype=np.int64),
         impulse=np.zeros(batch + (0,)),
         mu=np.zeros(batch + (0,)),

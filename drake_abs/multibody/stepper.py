@@ -209,14 +209,22 @@ class ComplementarityStepper:
         if active.all():  # nothing was left out
             return
         nq = self.sizes[0]
-        for _ in range(MAX_REPAIRS):
-            phi = self.model.distances(
-                out["x_next"][:, :nq]
-            )  # NaN for a non-finite state: compares False
+        for repair in range(MAX_REPAIRS + 1):
+            # a non-finite state's distances are NaN, which compare False
+            phi = self.model.distances(out["x_next"][:, :nq])
             missed = (phi < -REPAIR_TOL) & ~active
             if not missed.any():
                 return
             rows = np.flatnonzero(missed.any(axis=1))
+            if repair == MAX_REPAIRS:  # out of repairs: flagged, never passed as valid
+                out["converged"][rows] = False
+                warnings.warn(
+                    f"{rows.size} step(s) still pass a left-out contact after {MAX_REPAIRS} "
+                    "repairs; their `converged` flags are False",
+                    StepOverflowWarning,
+                    stacklevel=3,
+                )
+                return
             active[rows] |= missed[rows]
             sub = self._solve(q[rows], v[rows], u[rows], active[rows], None, jacobians, parameters)
             for key, value in sub.items():

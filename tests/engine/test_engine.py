@@ -261,3 +261,15 @@ def test_every_stepper_returns_the_one_step_record():
         assert s.x_next.shape == (B, nx) and s.converged.shape == (B,) and s.converged.all()
         assert s.dx_dx.shape == (B, nx, nx) and s.dx_du.shape == (B, nx, u.shape[1])
         assert s.mu.shape == (B, nc) and s.iterations.shape == (B,)
+
+
+def test_an_overflowing_contact_free_step_is_flagged_not_valid():
+    """A linear model that overflows: its non-finite steps are unconverged, and the rollout is
+    dropped (NaN Jacobians), never returned as a valid result."""
+    unstable = LinearStepper(1e200 * np.eye(2), np.ones((2, 1)))
+    with np.errstate(all="ignore"), pytest.warns(UserWarning):
+        traj = open_loop(unstable, np.ones(2), np.zeros((3, 1)))
+    assert traj.converged[0, 0] and not traj.converged[0, 1:].any()
+    assert not traj.used[0] and np.isnan(traj.dxH_dx0).all()
+    step = qc.QuadcopterStepper(PRM).step(np.zeros((2, 12)), np.full((2, 4), 1e160))
+    assert not step.converged.any()  # thrust overflows: flagged

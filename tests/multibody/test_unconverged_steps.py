@@ -74,7 +74,8 @@ def test_an_unconverged_smoothed_step_takes_the_exact_step():
             if bad.size:
                 e = exact.step(x[bad], u[bad], jacobians=False)
                 assert e.converged.all()
-                np.testing.assert_array_equal(r.x_next[bad], e.x_next)
+                # the same exact solve, reached through the fallback and directly
+                np.testing.assert_allclose(r.x_next[bad], e.x_next, rtol=1e-12, atol=1e-15)
                 flagged += bad.size
             x = r.x_next
     assert flagged > 0  # the case does occur here (else this test would check nothing)
@@ -102,3 +103,24 @@ def test_pruning_never_lets_a_fast_impact_through():
         np.testing.assert_allclose(a.x_next, b.x_next, rtol=1e-9, atol=1e-12)
         assert cm.distances(a.x_next[:, :nq]).min() > -1e-9
         x = a.x_next
+
+
+def test_a_step_that_runs_out_of_repairs_is_flagged(monkeypatch):
+    """With no repair allowed, the fast ball's pruned step passes through the ground: it must
+    come back flagged, never labelled converged."""
+    from drake_abs.multibody import stepper as stepper_module
+
+    monkeypatch.setattr(stepper_module, "MAX_REPAIRS", 0)
+    model = build_scene_model("ball_throw")
+    nq = model.contact_model.nq
+    x = model.x0.copy()
+    x[2], x[nq:] = 0.5, 0.0
+    x[nq + 2] = -100.0
+    for _ in range(3):
+        with pytest.warns(stepper_module.StepOverflowWarning, match="repairs"):
+            r = model.stepper().step(x[None], np.zeros((1, model.contact_model.nu)))
+        if model.contact_model.distances(r.x_next[:, :nq]).min() < -1e-6:
+            assert not r.converged[0]
+            return
+        x = r.x_next[0]
+    raise AssertionError("the ball never reached the ground")
