@@ -29,11 +29,26 @@ Sections:
    ``mu = 0``) against time per problem; (b) for the exact LCP (``mu = 0``) and each
    ``exact_tol = tol``, the achieved residual and error against Moby against time per problem.
 
+5. Problem families (issue 13): for each family and size d in (10, 16, 20, 24, 32, 48, 64, 101)
+   (friction: d = 12 .. 102), how many problems converge at mu = 0 with the interior point alone
+   (second starts on, crossover off) and with the crossover (the default), the interior-point
+   iterations and principal pivots taken, the solver's residual and an independent check of each
+   converged answer (``max(-w_i, min(lam_i F_ii, |w_i|)) / (|q_i| + (|F| |lam|)_i)``, recomputed
+   in the original units), and how many converge at mu = 1e-6 (where the crossover only supplies
+   a start, docs/math.md section 3b). Families: Csizmadia (1 on the diagonal, -1 below; q with
+   solution (1, 0, 1, ...)), Murty (1 on the diagonal, 2 below, q = -1), Fathy (L L^T, L with 1 on
+   the diagonal and 2 below, q = -1), random non-symmetric P-matrices with an indefinite symmetric
+   part (``D1 P D2``, positive diagonals over two decades), random singular PSD (``J J^T`` of rank
+   d/2, q strictly feasible), ill-conditioned PD (cond 1e10, q standard normal) and frictional
+   contact (Stewart-Trinkle, 4 directions per contact, random Jacobians and velocities; copositive,
+   not P, solved with ``on_bad_matrix="attempt"``).
+
 Usage::
 
     python benchmarks/bench_lcp.py            # full size (a few minutes)
     python benchmarks/bench_lcp.py --quick    # reduced size (under a minute)
     python benchmarks/bench_lcp.py --json results/bench_lcp.json
+    python benchmarks/bench_lcp.py --families  # section 5 only
 
 The numbers printed are also written as JSON (default ``results/bench_lcp.json``).
 """
@@ -61,6 +76,7 @@ import numpy as np
 
 import drake_abs.lcp.ipm
 from drake_abs import solve_lcp
+from drake_abs.lcp.matrix_class import _strictly_diagonally_dominant
 
 SEED = 20250101
 MU_TARGET = 1e-10
@@ -583,6 +599,215 @@ def bench_tradeoff(cfg: Config, log: WarningLog) -> dict[str, Any]:
     }
 
 
+# --- section 5: problem families ----------------------------------------------------------------
+
+FAMILY_DIMS = (10, 16, 20, 24, 32, 48, 64, 101)
+FRICTION_CONTACTS = (2, 4, 8, 10, 17)  # d = 6 per contact: 12 .. 102
+FAMILY_SMOOTH_MU = 1e-6
+
+
+def csizmadia_problem(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Csizmadia's matrix (1 on the diagonal, -1 below) and the q whose solution is
+    (1, 0, 1, 0, ...)."""
+    F = 2.0 * np.eye(d) - np.tril(np.ones((d, d)))
+    x = (np.arange(d) % 2 == 0).astype(float)
+    return F, 1.0 - x - F @ x
+
+
+def murty_problem(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Murty's problem: 1 on the diagonal, 2 below, q = -1 (solution e_1)."""
+    return np.eye(d) + 2.0 * np.tril(np.ones((d, d)), -1), -np.ones(d)
+
+
+def fathy_problem(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fathy's problem: L L^T with L of murty_problem, q = -1 (solution e_1)."""
+    L = murty_problem(d)[0]
+    return L @ L.T, -np.ones(d)
+
+
+def scaled_p_problems(rng, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Non-symmetric P-matrices D1 P D2 (indefinite symmetric part), q standard normal."""
+    P = random_p_matrices(rng, d, n)
+    D1 = 10 ** rng.uniform(-1, 1, (n, d, 1))
+    D2 = 10 ** rng.uniform(-1, 1, (n, 1, d))
+    return D1 * P * D2, rng.standard_normal((n, d))
+
+
+def singular_psd_problems(rng, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """J J^T of rank d/2, q = s0 - F lam0 with lam0, s0 > 0 (strictly feasible)."""
+    J = rng.standard_normal((n, d, max(1, d // 2)))
+    F = J @ J.transpose(0, 2, 1)
+    lam0 = rng.uniform(0.01, 1.0, (n, d))
+    s0 = rng.uniform(0.01, 1.0, (n, d))
+    return F, s0 - np.einsum("bij,bj->bi", F, lam0)
+
+
+def ill_conditioned_problems(rng, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric positive definite, eigenvalues log-spaced over 1e0..1e-10."""
+    Qm, _ = np.linalg.qr(rng.standard_normal((n, d, d)))
+    F = Qm @ (np.logspace(0, -10, d)[None, :, None] * Qm.transpose(0, 2, 1))
+    return 0.5 * (F + F.transpose(0, 2, 1)), rng.standard_normal((n, d))
+
+
+def friction_problems(rng, nc: int, n: int, k: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Stewart-Trinkle LCPs in (gamma, beta, omega), d = nc (2 + k): random generalised mass
+    matrix (nv = 2 nc + 6), normal and tangent Jacobians, velocities and distances; friction
+    coefficient 0.5."""
+    nv = 2 * nc + 6
+    F = np.zeros((n, nc * (2 + k), nc * (2 + k)))
+    q = np.zeros((n, nc * (2 + k)))
+    E = np.kron(np.eye(nc), np.ones((k, 1)))  # (nc k, nc)
+    for b in range(n):
+        A = rng.standard_normal((nv, nv))
+        Minv = np.linalg.inv(A @ A.T / nv + np.eye(nv))
+        Jn = rng.standard_normal((nc, nv))
+        Dt = rng.standard_normal((nc * k, nv))
+        v = rng.standard_normal(nv)
+        phi_h = rng.uniform(-1.0, 1.0, nc)
+        G = np.vstack([Jn, Dt])
+        W = G @ Minv @ G.T
+        F[b, : nc * (1 + k), : nc * (1 + k)] = W
+        F[b, nc : nc * (1 + k), nc * (1 + k) :] = E
+        F[b, nc * (1 + k) :, :nc] = 0.5 * np.eye(nc)
+        F[b, nc * (1 + k) :, nc : nc * (1 + k)] = -E.T
+        q[b, :nc] = Jn @ v + phi_h
+        q[b, nc : nc * (1 + k)] = Dt @ v
+    return F, q
+
+
+def independent_check(F: np.ndarray, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """(B,) the largest relative violation of each answer, recomputed from F, q and lam."""
+    w = np.einsum("bij,bj->bi", F, lam) + q
+    row = np.abs(q) + np.einsum("bij,bj->bi", np.abs(F), np.abs(lam)) + np.finfo(float).tiny
+    diag = np.abs(np.diagonal(F, axis1=-2, axis2=-1))
+    comp = np.minimum(np.abs(lam) * diag, np.abs(w))
+    return np.max(np.maximum(np.maximum(-w, -lam * diag), comp) / row, axis=1)
+
+
+def family_problems(cfg: Config) -> Iterator[tuple[str, int, np.ndarray, np.ndarray, str]]:
+    """(family, d, F (n, d, d), q (n, d), on_bad_matrix) for every row of section 5."""
+    n = max(3, cfg.n_problems // 3)
+    for name, make in (
+        ("Csizmadia", csizmadia_problem),
+        ("Murty", murty_problem),
+        ("Fathy", fathy_problem),
+    ):
+        for d in FAMILY_DIMS:
+            F, q = make(d)
+            yield name, d, F[None], q[None], "raise"
+    for d in FAMILY_DIMS:  # the same matrices, harder right-hand sides
+        F = csizmadia_problem(d)[0]
+        yield "Csizmadia, q = -1", d, F[None], -np.ones((1, d)), "raise"
+    for d in FAMILY_DIMS:
+        F = csizmadia_problem(d)[0]
+        q = rng_for(5, 8, d).standard_normal((n, d))
+        yield "Csizmadia, random q", d, np.broadcast_to(F, (n, d, d)), q, "raise"
+    for key, (name, make) in enumerate(
+        (
+            ("random P (non-sym.)", scaled_p_problems),
+            ("random PSD (rank d/2)", singular_psd_problems),
+            ("ill-cond. PD (1e10)", ill_conditioned_problems),
+        )
+    ):
+        for d in FAMILY_DIMS:
+            F, q = make(rng_for(5, key, d), d, n)
+            yield name, d, F, q, "raise"
+    for nc in FRICTION_CONTACTS:
+        F, q = friction_problems(rng_for(5, 9, nc), nc, n)
+        yield "friction (Stewart-Trinkle)", q.shape[1], F, q, "attempt"
+
+
+def bench_families(cfg: Config, log: WarningLog) -> dict[str, Any]:
+    rows = []
+    with log.capture("5 problem families"):
+        for name, d, F, q, policy in family_problems(cfg):
+            n = q.shape[0]
+            drake_abs.lcp.ipm.POLISH = False
+            try:
+                alone = solve_lcp(F, q, 0.0, on_bad_matrix=policy)
+            finally:
+                drake_abs.lcp.ipm.POLISH = True
+            r = solve_lcp(F, q, 0.0, on_bad_matrix=policy)
+            smooth = solve_lcp(F, q, FAMILY_SMOOTH_MU, on_bad_matrix=policy)
+            check = independent_check(F, q, r.lam)
+            # the old default (before issue 13) refused every non-PSD F with d > 10 that was
+            # not strictly diagonally dominant
+            classes_now = np.asarray(r.matrix_class)
+            old_refused = int(
+                np.sum(
+                    (policy == "raise")
+                    & (d > 10)
+                    & (classes_now != drake_abs.lcp.MatrixClass.PSD)
+                    & ~_strictly_diagonally_dominant(F)
+                )
+            )
+            conv = r.converged
+            classes = sorted({int(c) for c in r.matrix_class})
+            worst_residual = float(np.max(r.residual[conv])) if conv.any() else np.nan
+            worst_check = float(np.max(check[conv])) if conv.any() else np.nan
+            rows.append(
+                {
+                    "family": name,
+                    "d": d,
+                    "n_problems": n,
+                    "matrix_class": "/".join(
+                        "attempt" if c < 0 else drake_abs.lcp.MatrixClass(c).name for c in classes
+                    ),
+                    "old_default_refused": old_refused,
+                    "ipm_alone_converged": int(alone.converged.sum()),
+                    "converged": int(conv.sum()),
+                    "polished": int(r.polished.sum()),
+                    "median_iterations": float(np.median(r.iterations)),
+                    "max_iterations": int(np.max(r.iterations)),
+                    "max_pivots": int(np.max(r.pivots)),
+                    "max_residual_converged": worst_residual,
+                    "max_check_converged": worst_check,
+                    "smoothed_converged": int(smooth.converged.sum()),
+                }
+            )
+    print_table(
+        "[5] Problem families at mu = 0: converged of attempted, interior point alone (second "
+        "starts, no crossover) and with the crossover; iterations are the interior point's "
+        "(all starts and the crossover's check), pivots the crossover's; check = independent "
+        f"relative violation of the converged answers; last column: converged at mu = "
+        f"{FAMILY_SMOOTH_MU:g}",
+        [
+            "family",
+            "d",
+            "class",
+            "old: refused",
+            "IPM alone",
+            "with crossover",
+            "polished",
+            "median iters",
+            "max iters",
+            "max pivots",
+            "max residual",
+            "max check",
+            f"mu={FAMILY_SMOOTH_MU:g}",
+        ],
+        [
+            [
+                r["family"],
+                r["d"],
+                r["matrix_class"],
+                r["old_default_refused"],
+                f"{r['ipm_alone_converged']}/{r['n_problems']}",
+                f"{r['converged']}/{r['n_problems']}",
+                r["polished"],
+                r["median_iterations"],
+                r["max_iterations"],
+                r["max_pivots"],
+                r["max_residual_converged"],
+                r["max_check_converged"],
+                f"{r['smoothed_converged']}/{r['n_problems']}",
+            ]
+            for r in rows
+        ],
+    )
+    return {"rows": rows, "smoothed_mu": FAMILY_SMOOTH_MU}
+
+
 # --- driver ------------------------------------------------------------------------------------
 
 
@@ -614,8 +839,19 @@ def main(argv: Sequence[str] | None = None) -> None:
         default=Path("results/bench_lcp.json"),
         help="where to write the numbers as JSON (default: results/bench_lcp.json)",
     )
+    parser.add_argument(
+        "--families", action="store_true", help="run section 5 (problem families) only"
+    )
     args = parser.parse_args(argv)
     cfg = QUICK if args.quick else FULL
+    if args.families:
+        log = WarningLog()
+        results = {"meta": metadata(cfg), "families": bench_families(cfg, log)}
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        path = args.json.with_name(args.json.stem + "_families.json")
+        path.write_text(json.dumps(results, indent=2, default=float) + "\n")
+        print(f"Wrote {path}")
+        return
 
     t_start = time.perf_counter()
     meta = metadata(cfg)
@@ -630,6 +866,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     results["batched_throughput"] = bench_batched_throughput(cfg, log)
     results["moby"] = bench_moby(cfg, log)
     results["speed_vs_accuracy"] = bench_tradeoff(cfg, log)
+    results["families"] = bench_families(cfg, log)
 
     distinct = {k: sorted(v) for k, v in log.distinct.items()}
     results["warnings"] = {"counts": log.counts, "distinct_messages": distinct}

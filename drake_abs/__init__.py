@@ -42,6 +42,7 @@ from drake_abs.contact import (
     LcsStepper,
     SmoothingPolicy,
     Step,
+    TimeStepScaled,
 )
 from drake_abs.engine import (
     Adjoints,
@@ -95,6 +96,7 @@ __all__ = [
     "LCPStatus",
     "MatrixClass",
     "SmoothingPolicy",
+    "TimeStepScaled",
     "point_mass_lcs",
     "rollout",
     "softened_lcp_1d",

@@ -3,6 +3,8 @@ the argument and the expected form."""
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 
@@ -32,3 +34,14 @@ def check_shape(arr: np.ndarray, expected: tuple[int, ...], name: str, form: str
     symbols, e.g. ``"(dx, dx)"``."""
     if arr.shape != expected:
         raise ValueError(f"{name} must have shape {form} = {expected}; got {arr.shape}")
+
+
+def as_count(value, name: str, *, minimum: int = 0) -> int:
+    """Return ``value`` as an ``int``, raising ``ValueError`` naming ``name`` unless it is an
+    integer (or an integral float) >= ``minimum``; booleans and strings are rejected."""
+    integral = isinstance(value, numbers.Integral) or (
+        isinstance(value, float) and value.is_integer()
+    )
+    if isinstance(value, bool) or not integral or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    return int(value)

@@ -209,12 +209,13 @@ def _our_stepper(scene: str, s: Setting, config: Config):
 
     cfg = config.scene_config
     i = 1 if scene == "ball" else 0  # ABS as for the box, but for the ball
-    scale = s.time_step / cfg.time_step  # mu is impulse x distance: scaled with h (module doc)
+    # mu is impulse x distance: stated at cfg.time_step, scaled to h by the scene (module doc)
+    href = cfg.time_step
     smoothing = {
         "exact": {"kind": "exact"},
-        "bs": {"kind": "fixed", "value": (s.value or 0.0) * scale},
-        "abs": {"kind": "contact_aware", "mu_max": cfg.abs_mu_max[i] * scale,
-                "length": cfg.abs_length[i]},
+        "bs": {"kind": "fixed", "value": s.value or 0.0, "reference_time_step": href},
+        "abs": {"kind": "contact_aware", "mu_max": cfg.abs_mu_max[i],
+                "length": cfg.abs_length[i], "reference_time_step": href},
         "gaussian": {"kind": "gaussian_matched", "sigma": s.value},
     }[s.family]  # fmt: skip
     spec = replace(_scene_spec(scene, config, s.time_step), smoothing=smoothing)

@@ -12,16 +12,26 @@ from drake_abs.multibody import PACKAGE_DIR, Scene
 
 def with_mass(scene: Scene, body: str, factor: float, folder: Path) -> Scene:
     """The scene with ``body``'s mass and rotational inertia scaled by ``factor`` (centre of
-    mass and unit inertia held, as Drake's ``RigidBody::SetMass``), through a re-written SDF."""
+    mass and unit inertia held, as Drake's ``RigidBody::SetMass``), through a re-written SDF or
+    URDF (elements ``<mass>0.2</mass>``, or attributes ``<mass value="0.2"/>``)."""
     spec = scene.models[0]
-    text = (PACKAGE_DIR / spec.file.removeprefix("drake_abs:")).read_text()
+    source = PACKAGE_DIR / spec.file.removeprefix("drake_abs:")
+    text = source.read_text()
     link = re.search(rf'<link name="{body}">.*?</inertial>', text, flags=re.S)
-    scaled = re.sub(
-        r"<(mass|ixx|iyy|izz|ixy|ixz|iyz)>([^<]+)</\1>",
-        lambda m: f"<{m.group(1)}>{float(m.group(2)) * factor!r}</{m.group(1)}>",
-        link.group(0),
-    )
-    path = folder / f"{body}_{factor!r}.sdf"
+    if source.suffix == ".urdf":
+        scaled = re.sub(
+            r'\b(value|ixx|iyy|izz|ixy|ixz|iyz)="([^"]+)"',
+            lambda m: f'{m.group(1)}="{float(m.group(2)) * factor!r}"',
+            link.group(0),
+        )
+    else:
+        scaled = re.sub(
+            r"<(mass|ixx|iyy|izz|ixy|ixz|iyz)>([^<]+)</\1>",
+            lambda m: f"<{m.group(1)}>{float(m.group(2)) * factor!r}</{m.group(1)}>",
+            link.group(0),
+        )
+    assert scaled != link.group(0) or factor == 1.0, f"no mass found for {body!r} in {source}"
+    path = folder / f"{body}_{factor!r}{source.suffix}"
     path.write_text(text[: link.start()] + scaled + text[link.end() :])
     return replace(scene, models=(replace(spec, file=str(path)),))
 

@@ -6,7 +6,14 @@ Drake-free; builds on :mod:`drake_abs.lcp`.
 """
 
 from drake_abs.contact.lcs import LCS, LcsStepper
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.smoothing import (
+    ContactAware,
+    Exact,
+    Fixed,
+    GaussianMatched,
+    SmoothingPolicy,
+    TimeStepScaled,
+)
 from drake_abs.contact.step import Step
 
 __all__ = [
@@ -18,4 +25,5 @@ __all__ = [
     "LcsStepper",
     "SmoothingPolicy",
     "Step",
+    "TimeStepScaled",
 ]

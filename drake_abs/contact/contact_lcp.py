@@ -63,6 +63,9 @@ from drake_abs.lcp.ipm import LCPResult, check_solver_options, solve_lcp_trusted
 #: within 200 iterations. Hence exact_tol = 1e-12 and a budget of 200 iterations.
 CONTACT_SOLVER_DEFAULTS = {"exact_tol": 1e-12, "max_iterations": 200}
 
+#: the friction formulations a :class:`FrictionCone` offers
+FORMULATIONS = ("stewart_trinkle", "anitescu")
+
 
 @dataclass(frozen=True)
 class FrictionCone:
@@ -79,14 +82,32 @@ class FrictionCone:
             of at most eps times the tangential velocity change the impulse causes; measured on
             the resting box it took failures at rest from 16 of 100 steps to 0 and left the
             trajectory unchanged to 1e-6 m. Its weight is held constant when differentiating.
+            Under ``"anitescu"`` it applies to every generator row, relative to their mean
+            diagonal (it makes the generator split unique at a sticking contact).
+        formulation: how the friction cone enters the LCP (docs/math.md section 6b):
+
+            - ``"stewart_trinkle"`` (default; the papers' eqs.): normal, tangent and cone rows as
+              in the module docstring. Exact Coulomb friction on the linearised cone, but the
+              LCP is not monotone (not P, not PSD), so the interior point may fail on it,
+              mostly under smoothing at sticking contacts (measured: benchmarks/
+              bench_convergence.py).
+            - ``"anitescu"``: one row per cone generator ``n + alpha t_j`` (the convex
+              relaxation): the LCP matrix is ``h D W D^T`` (positive semidefinite), a monotone
+              LCP that the interior point solves at every mu. Its artefact: a *sliding* contact
+              separates at ``alpha |v_t|`` (a lift of about ``alpha |v_t| h`` per step, where
+              Stewart-Trinkle keeps it on the ground); sticking, rolling and the sliding
+              deceleration are Coulomb's. Step outputs keep the Stewart-Trinkle layout
+              (gamma, beta, omega) with omega = 0.
     """
 
     coefficients: np.ndarray
     directions: int = 4
     regularization: float = 1e-8
+    formulation: str = "stewart_trinkle"
     _frictional: np.ndarray = field(init=False, repr=False, compare=False)
     _row_contact: np.ndarray = field(init=False, repr=False, compare=False)
     _mu_f: np.ndarray = field(init=False, repr=False, compare=False)
+    _generators: GeneratorMap | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         coeff = np.asarray(self.coefficients, dtype=float).reshape(-1)
@@ -95,6 +116,8 @@ class FrictionCone:
             raise ValueError(f"friction coefficients must be >= 0 or NaN; got {coeff}")
         if not (np.isfinite(self.regularization) and self.regularization >= 0):
             raise ValueError(f"regularization must be >= 0; got {self.regularization!r}")
+        if self.formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {FORMULATIONS}; got {self.formulation!r}")
         if int(self.directions) < 2 and frictional.any():
             raise ValueError(
                 f"directions must be >= 2 for frictional contacts; got {self.directions}"
@@ -106,6 +129,7 @@ class FrictionCone:
         rows = np.concatenate([np.arange(coeff.size), np.repeat(fr, int(self.directions)), fr])
         object.__setattr__(self, "_row_contact", rows.astype(np.int64))
         object.__setattr__(self, "_mu_f", coeff[fr])
+        object.__setattr__(self, "_generators", None)
 
     @property
     def frictional(self) -> np.ndarray:
@@ -128,6 +152,117 @@ class FrictionCone:
         nc = self.coefficients.size
         nf = self._frictional.size
         return nc, nf * self.directions, nf
+
+    def with_formulation(self, formulation: str) -> FrictionCone:
+        """The same cone under another friction formulation."""
+        if formulation == self.formulation:
+            return self
+        return FrictionCone(self.coefficients, self.directions, self.regularization, formulation)
+
+    @property
+    def generators(self) -> GeneratorMap:
+        """The Anitescu generator rows of this cone (built once)."""
+        if self._generators is None:
+            object.__setattr__(self, "_generators", GeneratorMap.of(self))
+        return self._generators
+
+
+@dataclass(frozen=True)
+class GeneratorMap:
+    """The rows of the Anitescu formulation (docs/math.md section 6b) of a cone with nc
+    contacts: one generator per frictionless contact (its normal) and k per frictional contact
+    (``n + alpha t_j``, j = 1..k), in contact order; ng generators in all.
+
+    Attributes:
+        contact: (ng,) the contact of each generator.
+        tangent: (ng,) its row among the cone's tangent rows (-1 for a normal).
+        alpha: (ng,) its friction coefficient (0 for a normal).
+        friction: (ng,) the index of its contact among the frictional ones (-1 for a normal).
+        to_lam: (d, ng) maps generator impulses to the Stewart-Trinkle layout
+            (gamma_c = sum of the contact's generator impulses; beta_j = alpha x the impulse of
+            generator j; omega = 0).
+        average: (nc, ng) each contact's mean over its generators (z_n = average z_g when the
+            contact's tangent directions sum to zero, as evenly spread ones do).
+        share: (ng, nc) 1/k_c: a contact's mu split evenly over its k_c generators, so that
+            summed over them the complementarity products equal the contact's mu.
+        rows_cone: the generator rows as a frictionless cone (with this cone's regularization).
+    """
+
+    contact: np.ndarray
+    tangent: np.ndarray
+    alpha: np.ndarray
+    friction: np.ndarray
+    to_lam: np.ndarray
+    average: np.ndarray
+    share: np.ndarray
+    rows_cone: FrictionCone
+
+    @classmethod
+    def of(cls, cone: FrictionCone) -> GeneratorMap:
+        nc, nt, nf = cone.sizes()
+        k = cone.directions
+        order = {c: f for f, c in enumerate(cone.frictional)}
+        contact, tangent, alpha, friction = [], [], [], []
+        for c in range(nc):
+            if c in order:
+                f = order[c]
+                contact += [c] * k
+                tangent += list(range(f * k, (f + 1) * k))
+                alpha += [cone.friction_coefficients[f]] * k
+                friction += [f] * k
+            else:
+                contact.append(c)
+                tangent.append(-1)
+                alpha.append(0.0)
+                friction.append(-1)
+        contact, tangent = np.array(contact), np.array(tangent)
+        alpha, friction = np.array(alpha, dtype=float), np.array(friction)
+        ng = contact.size
+        to_lam = np.zeros((nc + nt + nf, ng))
+        to_lam[contact, np.arange(ng)] = 1.0
+        fr = tangent >= 0
+        to_lam[nc + tangent[fr], np.flatnonzero(fr)] = alpha[fr]
+        member = np.zeros((nc, ng))
+        member[contact, np.arange(ng)] = 1.0
+        count = member.sum(axis=1)
+        rows_cone = FrictionCone(np.full(ng, np.nan), k, cone.regularization)
+        return cls(
+            contact, tangent, alpha, friction, to_lam, member / count[:, None], member.T / count,
+            rows_cone,
+        )  # fmt: skip
+
+    @property
+    def size(self) -> int:
+        return self.contact.size
+
+
+class _GeneratorSmoothing(SmoothingPolicy):
+    """A contact-level smoothing policy seen from the generator rows: each contact's mu comes
+    from its mean generator distance and compliance (``average``), and is shared evenly by its
+    generators (``share``)."""
+
+    def __init__(self, inner: SmoothingPolicy, generators: GeneratorMap):
+        self.inner = inner
+        self.g = generators
+
+    @property
+    def is_constant(self) -> bool:
+        return self.inner.is_constant
+
+    @property
+    def is_exact(self) -> bool:
+        return self.inner.is_exact
+
+    def _contact_level(self, z, F):
+        A = self.g.average
+        return z @ A.T, A @ F @ A.T
+
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return self.inner.mu(*self._contact_level(z, F)) @ self.g.share.T
+
+    def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        dmu = self.inner.dmu_dz(*self._contact_level(z, F))  # (B, nc, nc)
+        return self.g.share @ dmu @ self.g.average
 
 
 @dataclass(frozen=True)
@@ -188,12 +323,15 @@ class ParameterDerivatives:
         dW: (B, nv, nv, T) derivative of the inverse mass matrix (e.g. for body masses), or
             None where no parameter moves it.
         dv_free: (B, nv, T) derivative of the free velocity, or None likewise.
+        dJn: (B, nc, nv, T) derivative of the normal rows' Jacobian, or None (the Anitescu
+            generators ``n + alpha t`` move with the friction coefficients).
     """
 
     dphi: np.ndarray
     dfriction: np.ndarray
     dW: np.ndarray | None = None
     dv_free: np.ndarray | None = None
+    dJn: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -227,9 +365,12 @@ class ContactStepResult:
 
 
 def assemble_lcp(
-    quant: StepQuantities, cone: FrictionCone, h: float
+    quant: StepQuantities, cone: FrictionCone, h: float, *, regularize_normal: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The LCP ``(F (B, d, d), z (B, d))`` of one step, and the row scale S (nc + nt,)."""
+    """The LCP ``(F (B, d, d), z (B, d))`` of one step, and the row scale S (nc + nt,).
+
+    The cone's regularization applies to the tangent rows, or with ``regularize_normal`` (the
+    Anitescu generator rows) to the normal rows."""
     fr = cone.frictional
     F, z, S = _assemble(
         np.asarray(quant.W, dtype=float),
@@ -242,12 +383,13 @@ def assemble_lcp(
         cone.directions,
         float(cone.regularization),
         float(h),
+        0 if regularize_normal else cone.sizes()[0],
     )
     return F, z, S
 
 
 @nb.njit(cache=True)
-def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h):
+def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h, reg_from):
     """Compiled body of :func:`assemble_lcp` (the F and z of the module docstring)."""
     B, nv = v_free.shape
     nc = phi.shape[1]
@@ -287,12 +429,12 @@ def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h):
                 F[b, row, r + f] = 1.0
                 F[b, r + f, row] = -1.0
             F[b, r + f, fr[f]] = coeff[f]
-        if reg > 0.0 and nt > 0:
+        if reg > 0.0 and r > reg_from:  # rows reg_from..r (the tangent rows, or all)
             mean = 0.0
-            for i in range(nc, r):
+            for i in range(reg_from, r):
                 mean += F[b, i, i]
-            weight = reg * mean / nt
-            for i in range(nc, r):
+            weight = reg * mean / (r - reg_from)
+            for i in range(reg_from, r):
                 F[b, i, i] += weight
     return F, z, S
 
@@ -329,11 +471,6 @@ def contact_step(
         )
     if nc == 0:
         return _free_step(quant, h, parameters)
-    F, z, S = assemble_lcp(quant, cone, h)
-    Fnn = F[:, :nc, :nc]
-    mu_n = smoothing.mu(z[:, :nc], Fnn)
-    mu = expand_mu(mu_n, cone, h)
-    jac = quant.has_derivatives
     options = {**CONTACT_SOLVER_DEFAULTS, **solver_options}
     unknown = set(options) - set(CONTACT_SOLVER_DEFAULTS) - {"tol"}
     if unknown:
@@ -342,8 +479,28 @@ def contact_step(
         )
     options.setdefault("tol", 1e-12)
     check_solver_options(options["tol"], options["max_iterations"], options["exact_tol"])
-    lcp = solve_lcp_trusted(F, z, mu, jacobians=jac, strict=strict, **options)
-    lcp = exact_fallback(F, z, mu, lcp, jacobians=jac, **options)
+    if cone.formulation == "anitescu" and nf > 0:
+        return _anitescu_step(quant, cone, h, smoothing, gradient, strict, parameters, options)
+    return _lcp_step(quant, cone, h, smoothing, gradient, strict, parameters, options)
+
+
+def _lcp_step(
+    quant, cone, h, smoothing, gradient, strict, parameters, options, regularize_normal=False
+) -> ContactStepResult:
+    """Assemble, smooth, solve (with the exact fallback), integrate and differentiate one
+    batched step whose LCP rows are the cone's (Stewart-Trinkle, or Anitescu generators passed
+    as a frictionless cone with ``regularize_normal``)."""
+    nc, nt, nf = cone.sizes()
+    F, z, S = assemble_lcp(quant, cone, h, regularize_normal=regularize_normal)
+    Fnn = F[:, :nc, :nc]
+    mu_n = smoothing.mu(z[:, :nc], Fnn)
+    mu = expand_mu(mu_n, cone, h)
+    jac = quant.has_derivatives
+    # without friction rows F = h G W G^T (+ a positive diagonal) is positive semidefinite by
+    # construction (W = M^-1 is SPD): a monotone LCP (Anitescu generators, frictionless contact)
+    monotone = nt == 0
+    lcp = solve_lcp_trusted(F, z, mu, jacobians=jac, strict=strict, monotone=monotone, **options)
+    lcp = exact_fallback(F, z, mu, lcp, jacobians=jac, monotone=monotone, **options)
     lam = lcp.lam
     lam_v = lam[:, : nc + nt]
     G = np.concatenate([quant.Jn, quant.Jt], axis=1)
@@ -363,6 +520,86 @@ def contact_step(
         converged=lcp.converged,
         lcp=lcp,
         **out,
+    )
+
+
+def _anitescu_step(quant, cone, h, smoothing, gradient, strict, par, options):
+    """The step under the Anitescu formulation (docs/math.md section 6b): the generator rows
+    ``D = Jn[c] + alpha Jt[j]`` as a frictionless LCP (positive semidefinite ``h D W D^T``,
+    regularized), its results mapped back to the Stewart-Trinkle layout."""
+    g = cone.generators
+    ng = g.size
+    fr = g.tangent >= 0
+    tangent = np.where(fr, g.tangent, 0)
+
+    def rows(Jn, Jt):  # generator rows of a normal and a tangent Jacobian (values or derivatives)
+        a = g.alpha.reshape((1, ng) + (1,) * (Jn.ndim - 2))
+        return Jn[:, g.contact] + a * Jt[:, tangent] * fr.reshape(a.shape)
+
+    B, nv = quant.v.shape
+    derivs = {}
+    if quant.has_derivatives:
+        derivs = dict(
+            dW=quant.dW,
+            dv_free=quant.dv_free,
+            dphi=quant.dphi[:, g.contact],
+            dJn=rows(quant.dJn, quant.dJt),
+            dJt=np.zeros((B, 0) + quant.dJt.shape[2:]),
+            dN=quant.dN,
+            dW_times=quant.dW_times,
+        )
+    quant_g = StepQuantities(
+        q=quant.q,
+        v=quant.v,
+        W=quant.W,
+        v_free=quant.v_free,
+        phi=quant.phi[:, g.contact],
+        Jn=rows(quant.Jn, quant.Jt),
+        Jt=np.zeros((B, 0, nv)),
+        N=quant.N,
+        **derivs,
+    )
+    cone_g = g.rows_cone
+    par_g = None
+    if par is not None:
+        T = par.dphi.shape[-1]
+        _check_parameter_shapes(par, cone, B)
+        # d D_j / d theta = t_j d alpha / d theta: the generators move with the coefficients
+        dalpha = np.zeros((ng, T))
+        dalpha[fr] = par.dfriction[g.friction[fr]]
+        dJn = quant.Jt[:, tangent, :, None] * (dalpha * fr[:, None])[None, :, None, :]
+        par_g = ParameterDerivatives(
+            par.dphi[:, g.contact], np.zeros((0, T)), par.dW, par.dv_free, dJn
+        )
+    r = _lcp_step(
+        quant_g, cone_g, h, _GeneratorSmoothing(smoothing, g), gradient, strict, par_g, options,
+        regularize_normal=True,
+    )  # fmt: skip
+    L = g.to_lam
+    lam_g = r.lam
+
+    def to_lam(d):  # (B, ng, P) -> (B, d, P)
+        return None if d is None else L @ d
+
+    dlam_dtheta = None
+    if r.dlam_dtheta is not None:
+        dlam_dtheta = L @ r.dlam_dtheta
+        nc = cone.sizes()[0]
+        # beta_j = alpha lam_g[j]: its coefficient's derivative times the generator impulse
+        dlam_dtheta[:, nc + g.tangent[fr]] += lam_g[:, fr, None] * dalpha[fr][None]
+    return ContactStepResult(
+        q_next=r.q_next,
+        v_next=r.v_next,
+        lam=lam_g @ L.T,
+        mu=r.mu @ (g.share > 0),  # a contact's mu: the sum of its generators' shares
+        converged=r.converged,
+        dx_dx=r.dx_dx,
+        dx_du=r.dx_du,
+        dlam_dx=to_lam(r.dlam_dx),
+        dlam_du=to_lam(r.dlam_du),
+        lcp=r.lcp,
+        dx_dtheta=r.dx_dtheta,
+        dlam_dtheta=dlam_dtheta,
     )
 
 
@@ -456,7 +693,7 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, 
             + np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
         )
     if par is not None:  # theta columns after p
-        inner_t, dz_t, dzn_t = _parameter_blocks(quant, cone, h, S, G, lam, f, par)
+        inner_t, dz_t, dzn_t = _parameter_blocks(quant, cone, h, S, G, lam, f, v_next, par)
         inner = np.concatenate([inner, inner_t], axis=-1)
         dz_eff = np.concatenate([dz_eff, dz_t], axis=-1)
         dN = np.concatenate([dN, np.zeros(dN.shape[:-1] + (dz_t.shape[-1],))], axis=-1)
@@ -476,7 +713,7 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, 
     return out
 
 
-def _parameter_blocks(quant, cone, h, S, G, lam, f, par):
+def _parameter_blocks(quant, cone, h, S, G, lam, f, v_next, par):
     """The theta columns' inputs to the chain rule: ``inner`` (B, nv, T), the velocity change at
     fixed impulses; ``dz`` (B, d, T), the LCP offsets' derivative with F's applied to lam; and
     ``dzn`` (B, nc, T), the normal distances' derivative (for mu in the total mode).
@@ -488,17 +725,15 @@ def _parameter_blocks(quant, cone, h, S, G, lam, f, par):
     nc, nt, nf = cone.sizes()
     B, d = lam.shape
     T = par.dphi.shape[-1]
-    if par.dphi.shape != (B, nc, T) or par.dfriction.shape != (nf, T):
-        raise ValueError(
-            f"parameter derivatives must be dphi (B, nc, T) = ({B}, {nc}, T) and dfriction "
-            f"(nf, T) = ({nf}, T); got {par.dphi.shape} and {par.dfriction.shape}"
-        )
+    _check_parameter_shapes(par, cone, B)
     r = nc + nt
     inner = np.zeros((B, quant.W.shape[-1], T))
     if par.dv_free is not None:
         inner += par.dv_free
     if par.dW is not None:
         inner += np.einsum("bnmt,bm->bnt", par.dW, f)
+    if par.dJn is not None:  # W dJn^T gamma
+        inner += quant.W @ np.einsum("bint,bi->bnt", par.dJn, lam[:, :nc])
     dz = np.zeros((B, d, T))
     dz[:, :nc] = par.dphi
     dz[:, :r] += S[None, :, None] * np.einsum("bin,bnt->bit", G, inner)
@@ -506,7 +741,20 @@ def _parameter_blocks(quant, cone, h, S, G, lam, f, par):
     dzn = par.dphi.copy()
     if par.dv_free is not None:
         dzn += h * np.einsum("bin,bnt->bit", quant.Jn, par.dv_free)
+    if par.dJn is not None:  # the rows themselves move: h dJn v+ (and h dJn v_free for mu)
+        dz[:, :nc] += h * np.einsum("bint,bn->bit", par.dJn, v_next)
+        dzn += h * np.einsum("bint,bn->bit", par.dJn, quant.v_free)
     return inner, dz, dzn
+
+
+def _check_parameter_shapes(par: ParameterDerivatives, cone: FrictionCone, B: int) -> None:
+    nc, nt, nf = cone.sizes()
+    T = par.dphi.shape[-1]
+    if par.dphi.shape != (B, nc, T) or par.dfriction.shape != (nf, T):
+        raise ValueError(
+            f"parameter derivatives must be dphi (B, nc, T) = ({B}, {nc}, T) and dfriction "
+            f"(nf, T) = ({nf}, T); got {par.dphi.shape} and {par.dfriction.shape}"
+        )
 
 
 @nb.njit(cache=True)

@@ -25,6 +25,7 @@ from drake_abs.lcp.ipm import (
     check_solver_options,
     solve_lcp_trusted,
 )
+from drake_abs.lcp.matrix_class import MatrixClass
 
 #: How a step differentiates a state-dependent mu: ``"total"`` (the default everywhere: the true
 #: derivative of the step) or ``"frozen"`` (mu held constant, paper 000 Algorithm 1; biased
@@ -87,8 +88,10 @@ class LCS:
             )
         check_solver_options(**{**SOLVER_DEFAULTS, **self.solver_options})
         # One matrix check here, so that every step can skip it.
-        arrays["F"] = apply_matrix_policy(arrays["F"], self.on_bad_matrix)[0]
-        verified = self.on_bad_matrix != "attempt"
+        arrays["F"], _, classes = apply_matrix_policy(arrays["F"], self.on_bad_matrix)
+        # verified: PSD, a P-matrix, or regularised to a positive definite symmetric part; a
+        # matrix no cheap test could classify (d > 10) is attempted and its answers verified
+        verified = self.on_bad_matrix != "attempt" and int(classes[0]) != MatrixClass.UNVERIFIED
         object.__setattr__(self, "_step_check", "trusted" if verified else "attempt")
         for name, arr in arrays.items():
             arr.setflags(write=False)

@@ -17,6 +17,21 @@ dynamics are less stiff); ``mu = 0`` is hard contact.
 
 Each policy also gives ``dmu_dz`` (B, d, d) for the ``total`` gradient mode; the ``frozen`` mode
 (paper 000 Algorithm 1) treats mu as a constant.
+
+**Units and the time step.** In a contact problem a normal row reads ``gamma * s = mu`` with
+``gamma`` the normal impulse of the step (N s) and ``s`` the gap after it (m), so mu is in
+m N s. A body of weight ``m g`` resting on one barrier contact needs ``gamma = m g h`` per step,
+so it floats at the gap ``s* = mu / (m g h)``, and the barrier's force at a gap s is
+``mu / (h s)``: at a fixed mu, halving h doubles both. A value of mu (``Fixed``, ``ContactAware``'s
+``mu_min`` and ``mu_max``) is therefore tied to the time step it was chosen at. Measured on the
+1-D point mass (``drake_abs.tasks.point_mass``, 1 kg) dropped from 5 cm under
+``ContactAware(1e-2, 0.05)`` tuned at h = 10 ms: it settles about 4 cm up at h = 10 ms, but at
+h = 0.1 ms the same mu throws it to 2.3 m (``Fixed(1e-3)``: to 4.5 m). :class:`TimeStepScaled`
+restates a policy given at a reference step ``h_ref`` for the step h actually used, multiplying
+mu by ``h / h_ref``: the rest gap and the force law ``mu / (h s)`` are then the reference's at
+every h (a scene does this when its smoothing names ``reference_time_step``).
+:class:`GaussianMatched` is built from F (which carries h) and cannot be rescaled this way (see
+its docstring).
 """
 
 from __future__ import annotations
@@ -82,7 +97,11 @@ class Exact(SmoothingPolicy):
 class Fixed(SmoothingPolicy):
     """Barrier smoothing (BS): the same ``mu`` for every contact and state. Larger is smoother.
 
-    Units: those of ``lam * z`` (impulse times distance for contact problems).
+    Units: those of ``lam * z``: impulse times distance for contact problems, m N s. The value
+    holds for one time step h only: a body of weight ``m g`` resting on a barrier contact sits
+    at the gap ``mu / (m g h)``, so the same value at a 100 times smaller step floats it 100
+    times higher (module docstring). To state mu at a reference step and run at another, wrap
+    it: ``TimeStepScaled.between(Fixed(mu), h, h_ref)``.
     """
 
     value: float
@@ -124,8 +143,10 @@ class ContactAware(SmoothingPolicy):
     active (z crosses 0); the ``total`` gradient mode differentiates g but not that jump.
 
     Args:
-        mu_max: mu at zero distance (the most smoothing), > mu_min.
-        length: decay length of g, in the units of z (> 0).
+        mu_max: mu at zero distance (the most smoothing), > mu_min (m N s in a contact problem;
+            like :class:`Fixed`'s value it holds for one time step, see the module docstring
+            and :class:`TimeStepScaled`).
+        length: decay length of g, in the units of z (> 0; a distance: independent of h).
         mu_min: mu far from contact, >= 0 (0 is exact).
         g: optional custom non-increasing ``g(dist) -> (mu, dmu_ddist)`` replacing the default.
     """
@@ -186,6 +207,13 @@ class GaussianMatched(SmoothingPolicy):
     diagonal entry F_ii > 0 (exact when F is diagonal). Where kappa or the matched slack
     ``z + F_ii kappa`` is not positive (possible with c1, c2 != 0), mu = 0.
 
+    Time step: the matched solution resolves a Gaussian spread of the pre-step distance z
+    within one step, so its impulse near contact is about ``0.4 sigma / F``, with F ~ h / m:
+    the launch speed grows like sigma / h. On the 1 kg point mass, ``sigma = 2 mm`` resting on
+    the ground throws it 0.8 mm up at h = 10 ms but 6.4 m at h = 0.1 ms. Multiplying mu by
+    ``h / h_ref`` does not repair this (the impulse scales like the square root), so
+    :class:`TimeStepScaled` refuses this policy; choose sigma for the step it runs at.
+
     Args:
         sigma: width of the matched Gaussian, in the units of z (> 0).
         c1, c2: the paper's tunable constants (0 for the exact match).
@@ -230,3 +258,62 @@ class GaussianMatched(SmoothingPolicy):
         idx = np.arange(z.shape[-1])
         out[..., idx, idx] = dmu
         return out
+
+
+@dataclass(frozen=True)
+class TimeStepScaled(SmoothingPolicy):
+    """``policy`` stated at a reference time step, run at another: mu (and dmu_dz) are the inner
+    policy's times ``scale = h / h_ref``.
+
+    A barrier contact's rest gap is ``mu / (m g h)`` and its force at a gap s is ``mu / (h s)``
+    (module docstring); with mu proportional to h both are those of the reference step at every
+    h, so a policy tuned at h_ref keeps its meaning when the step is refined. Distances inside
+    the policy (``ContactAware.length``) are not scaled.
+
+    Args:
+        policy: the policy as stated at h_ref (:class:`Exact`, :class:`Fixed`,
+            :class:`ContactAware` or a custom one; not :class:`GaussianMatched`, whose mu is
+            not proportional to a parameter, see its docstring).
+        scale: ``h / h_ref``, a finite number > 0.
+    """
+
+    policy: SmoothingPolicy
+    scale: float
+
+    def __post_init__(self):
+        if not isinstance(self.policy, SmoothingPolicy):
+            raise ValueError(
+                f"TimeStepScaled.policy must be a SmoothingPolicy; got {type(self.policy).__name__}"
+            )
+        if isinstance(self.policy, GaussianMatched):
+            raise ValueError(
+                "TimeStepScaled.policy cannot be GaussianMatched: its impulse does not scale "
+                "with mu (choose sigma for the time step it runs at)"
+            )
+        object.__setattr__(self, "scale", _check_positive(self.scale, "TimeStepScaled.scale"))
+
+    @classmethod
+    def between(
+        cls, policy: SmoothingPolicy, time_step: float, reference_time_step: float
+    ) -> SmoothingPolicy:
+        """``policy`` (stated at ``reference_time_step``, s) for a step of ``time_step`` (s);
+        the policy itself when the two are equal or it is exact."""
+        h = _check_positive(time_step, "time_step")
+        h_ref = _check_positive(reference_time_step, "reference_time_step")
+        if h == h_ref or policy.is_exact:
+            return policy
+        return cls(policy, h / h_ref)
+
+    @property
+    def is_constant(self) -> bool:
+        return self.policy.is_constant
+
+    @property
+    def is_exact(self) -> bool:
+        return self.policy.is_exact
+
+    def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return self.scale * self.policy.mu(z, F)
+
+    def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return self.scale * self.policy.dmu_dz(z, F)

@@ -38,6 +38,18 @@ exact answer is lam = 0 with every friction slack 0 (degenerate), and from the d
 the iterates drift along the cone's unbounded direction; from the separated start it converges
 in 4 to 8 iterations for every mu. The iterations reported are those of both starts.
 
+Crossover (docs/math.md section 3b): a problem that still does not converge (the interior
+point stalled or diverged, as on Csizmadia's P-matrices at d >= 32, whose handicap is
+exponential in d) goes through :mod:`drake_abs.lcp.pivoting`: the active set is guessed from
+its last iterate (then from ``q < 0``), corrected by principal pivots to an exact solution of
+the mu = 0 LCP, and the compiled iterations are run again from a point next to it whose products
+are the requested targets. That answer replaces the old one only if it passes the same test
+below; ``result.pivots`` and ``result.polished`` report it. At mu = 0 this finishes P-matrix
+problems whatever their conditioning (pivoting is finite for P-matrices; the pivot budget
+``PIVOTS_PER_CONTACT d + PIVOTS_EXTRA`` bounds the work). At mu > 0 the exact solution is only a
+start for the centring steps to mu: attempted, verified, often not enough (it is measured in
+``benchmarks/bench_lcp.py``). It costs nothing on problems that converge.
+
 Safeguards: steps keep the contacts still driving down in the wide neighbourhood
 ``lam_i s_i >= 1e-3 mean`` (backtracking), and a problem whose duality measure stalls drops the
 second-order correction, which otherwise can cycle. A problem not known to be monotone (the
@@ -75,6 +87,7 @@ import numpy as np
 from drake_abs._validation import as_finite_array
 from drake_abs.lcp.ipm_kernel import solve
 from drake_abs.lcp.matrix_class import MatrixClass, classify_matrix
+from drake_abs.lcp.pivoting import active_guess, central_start, solve_by_pivoting
 from drake_abs.lcp.sensitivity import implicit_jacobians
 from drake_abs.lcp.status import LCPStatus
 
@@ -113,6 +126,10 @@ class LCPResult:
         regularization: (B,) ``delta`` added to F's diagonal (``F + delta I``), 0 if none.
         matrix_class: (B,) :class:`~drake_abs.lcp.matrix_class.MatrixClass` codes, or -1 when the
             check was skipped (``on_bad_matrix="attempt"``).
+        pivots: (B,) principal pivot steps of the crossover (0 where it did not run; see
+            :mod:`drake_abs.lcp.pivoting`).
+        polished: (B,) True where the answer came from the crossover (the interior point alone
+            did not converge); such an answer passed the same residual test as any other.
         dlam_dq: (B, d, d) implicit Jacobian, or None unless ``jacobians=True``.
         dlam_dmu: derivative with respect to mu in the form it was given: (B, d) for a scalar or
             one-per-problem mu, (B, d, d) for one mu per contact; None unless ``jacobians=True``.
@@ -130,6 +147,8 @@ class LCPResult:
     residual: np.ndarray
     regularization: np.ndarray
     matrix_class: np.ndarray
+    pivots: np.ndarray
+    polished: np.ndarray
     dlam_dq: np.ndarray | None = None
     dlam_dmu: np.ndarray | None = None
     tol: float = 1e-12
@@ -174,28 +193,27 @@ def apply_matrix_policy(
     if on_bad_matrix == "trusted":  # the caller verified F (e.g. LCS at construction)
         return F, np.zeros(B), np.full(B, MatrixClass.PSD, dtype=np.int8)
     classes, min_eig = classify_matrix(F)
-    bad = (classes == MatrixClass.UNVERIFIED) | (classes == MatrixClass.NOT_P)
+    # Only a matrix shown not to be P is refused or regularised. One that could be neither
+    # shown P nor shown not P (UNVERIFIED: d > 10, indefinite symmetric part, no cheap
+    # certificate) is attempted as a possibly non-monotone LCP, and its answers are verified
+    # like every other (module docstring): a P-matrix of any size is never refused.
+    bad = classes == MatrixClass.NOT_P
     delta = np.zeros(classes.shape)
     if np.any(bad):
         worst = float(np.min(np.where(bad, min_eig, np.inf)))
         if on_bad_matrix == "raise":
-            kind = (
-                "has a non-positive principal minor (not a P-matrix)"
-                if np.any(classes == MatrixClass.NOT_P)
-                else f"could not be shown to be a P-matrix (d = {F.shape[-1]} > 10)"
-            )
             raise ValueError(
                 "F must be positive semidefinite or a P-matrix: the symmetric part of F has "
-                f"smallest eigenvalue {worst:.3e} and F {kind}. Pass on_bad_matrix='regularize' "
-                "to add a multiple of the identity, or 'attempt' to try anyway with convergence "
-                "reported per problem."
+                f"smallest eigenvalue {worst:.3e} and F has a non-positive principal minor (not "
+                "a P-matrix). Pass on_bad_matrix='regularize' to add a multiple of the "
+                "identity, or 'attempt' to try anyway with convergence reported per problem."
             )
         # regularise: make the symmetric part positive definite with a small margin.
         scale = np.max(np.abs(F), axis=(-2, -1))
         delta = np.where(bad, -min_eig + 1e-8 * np.maximum(scale, 1.0), 0.0)
         F = F + delta[..., None, None] * np.eye(F.shape[-1])
         warnings.warn(
-            f"F is neither positive semidefinite nor a verified P-matrix in {int(np.sum(bad))} "
+            f"F is neither positive semidefinite nor a P-matrix in {int(np.sum(bad))} "
             f"problem(s); regularised to F + delta I with delta up to {float(np.max(delta)):.3e} "
             f"(smallest symmetric-part eigenvalue was {worst:.3e})",
             LCPRegularizationWarning,
@@ -211,6 +229,17 @@ def apply_matrix_policy(
 #: separated start (:func:`separated_start`). On by default; benchmarks turn it off to measure
 #: the default start alone.
 SECOND_START = True
+
+#: Whether problems that the interior point (with its second starts) did not solve go through the
+#: crossover of :func:`_crossover` (principal pivoting, :mod:`drake_abs.lcp.pivoting`). On by
+#: default; benchmarks and tests turn it off to measure the interior point alone. It runs only
+#: with ``SECOND_START``: turning the second starts off measures the default start alone.
+POLISH = True
+#: Pivot budget of each crossover attempt: ``PIVOTS_PER_CONTACT * d + PIVOTS_EXTRA``.
+PIVOTS_PER_CONTACT = 4
+PIVOTS_EXTRA = 20
+#: Relative roundoff allowed in the crossover's sign test, per contact (times d, times eps).
+SIGN_TEST_ULPS = 8.0
 
 SOLVER_DEFAULTS = {"tol": 1e-12, "max_iterations": 100, "exact_tol": 1e-15}
 
@@ -249,16 +278,21 @@ def solve_lcp(
         jacobians: also return ``dlam_dq`` and ``dlam_dmu`` (docs/math.md section 4).
         tol: relative tolerance on each row's primal residual and on ``lam_i s_i`` against
             ``mu_i`` (see the module docstring for the exact measure).
-        max_iterations: iteration limit; problems that hit it are flagged, not hidden.
+        max_iterations: iteration limit of each start (the default start, the second starts
+            and the crossover's check run each get it); problems that fail every start are
+            flagged, not hidden.
         exact_tol: relative accuracy of exact contacts: targets are floored at
             ``(exact_tol * c)^2`` with ``c = max|q_i| / sqrt(F_ii)`` (see the module docstring).
         strict: raise :class:`LCPConvergenceError` instead of warning when a problem does not
             converge.
-        on_bad_matrix: what to do when F is neither PSD nor a (verifiable) P-matrix: ``"raise"``
-            a ``ValueError``, ``"regularize"`` (add ``delta I`` and warn with delta),
-            ``"attempt"`` (skip the check and solve as a possibly non-monotone LCP; convergence
-            is still reported honestly), or ``"trusted"`` (skip the check: the caller has
-            verified that F is PSD or a P-matrix, as :class:`~drake_abs.LCS` does once).
+        on_bad_matrix: what to do when F is shown not to be a P-matrix (and is not PSD; see
+            :mod:`~drake_abs.lcp.matrix_class`): ``"raise"`` a ``ValueError``, ``"regularize"``
+            (add ``delta I`` and warn with delta), ``"attempt"`` (skip the check and solve as a
+            possibly non-monotone LCP; convergence is still reported honestly), or
+            ``"trusted"`` (skip the check: the caller has verified that F is PSD or a
+            P-matrix, as :class:`~drake_abs.LCS` does once). A matrix that is neither shown P
+            nor shown not P (``MatrixClass.UNVERIFIED``, d > 10) is attempted under every
+            policy but ``"trusted"``, with its answers verified.
         warm_start: optional ``(lam0, s0)`` of the same shape as q, strictly positive.
 
     Returns:
@@ -379,6 +413,11 @@ def _solve(
         for arr, new in zip(out, again, strict=True):
             arr[failed[took]] = new[took]
         iterations[failed] = total
+    pivots = np.zeros(B, dtype=np.int64)
+    polished = np.zeros(B, dtype=bool)
+    if SECOND_START and POLISH:  # the crossover is a retry too: off with the second starts
+        _crossover(F3, shared, Q, mu_full, exact_tol, float(tol), int(max_iterations), monotone,
+                   out, pivots, polished)  # fmt: skip
     dlam_dq = dlam_dmu = None
     if jacobians:
         with np.errstate(all="ignore"):
@@ -401,6 +440,8 @@ def _solve(
         residual=residual,
         regularization=regularization,
         matrix_class=matrix_class,
+        pivots=pivots,
+        polished=polished,
         dlam_dq=dlam_dq,
         dlam_dmu=dlam_dmu,
         tol=tol,
@@ -455,6 +496,59 @@ def _continuation_retry(F3, shared, Q, mu, exact_tol, tol, max_iterations, monot
 
 
 _RETRIES = (_separated_retry, _continuation_retry)
+
+
+def _crossover(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, out, pivots,
+               polished) -> None:  # fmt: skip
+    """Crossover for the problems of ``out`` (the kernel's output tuple, updated in place) that
+    did not converge (docs/math.md section 3b).
+
+    For each: guess the active set from its last iterate (and, failing that, from ``q < 0``),
+    correct it by principal pivoting to an exact solution of the mu = 0 LCP
+    (:func:`~drake_abs.lcp.pivoting.solve_by_pivoting`), place a strictly positive point next to
+    it whose products are the requested targets (:func:`~drake_abs.lcp.pivoting.central_start`)
+    and run the compiled iterations from there. The answer replaces the old one only if those
+    iterations meet the usual test ``residual <= tol``: for mu = 0 that is a check of the exact
+    solution at the exact floor (0 iterations when it passes at once); for mu > 0 the exact
+    solution is only a starting point for the centring steps to mu, attempted and verified the
+    same way. ``pivots`` (B,) receives the pivot steps spent, ``polished`` (B,) marks answers
+    that were replaced.
+    """
+    status, iterations, _, lam_out, s_out, _, mu_target, _ = out
+    failed = np.flatnonzero(status != LCPStatus.CONVERGED)
+    if not failed.size:
+        return
+    d = Q.shape[1]
+    budget = PIVOTS_PER_CONTACT * d + PIVOTS_EXTRA
+    eta = SIGN_TEST_ULPS * d * np.finfo(float).eps
+    D, _, _ = _scales(F3 if shared else F3[failed], shared, Q[failed])
+    rows, starts = [], []
+    for k, b in enumerate(failed):
+        Fb = F3[0] if shared else F3[b]
+        guesses = [active_guess(lam_out[b], s_out[b], D[k]), Q[b] < 0]
+        found, spent = solve_by_pivoting(Fb, Q[b], guesses, max_pivots=budget, eta=eta)
+        pivots[b] += spent
+        if not found.ok:
+            continue
+        lam0, s0 = central_start(found.lam, found.w, mu_target[b])
+        if np.all(np.isfinite(lam0) & np.isfinite(s0) & (lam0 > 0) & (s0 > 0)):
+            rows.append(b)
+            starts.append((lam0, s0))
+    if not rows:
+        return
+    rows = np.asarray(rows)
+    lam0 = np.ascontiguousarray(np.stack([a for a, _ in starts]))
+    s0 = np.ascontiguousarray(np.stack([b for _, b in starts]))
+    sub_F = F3 if shared else F3[rows]
+    again = solve(sub_F, shared, np.ascontiguousarray(Q[rows]),
+                  np.ascontiguousarray(mu_full[rows]), exact_tol, tol, max_iterations,
+                  np.ascontiguousarray(monotone[rows]), lam0, s0, True)  # fmt: skip
+    took = (again[0] == LCPStatus.CONVERGED) & again[7]
+    total = iterations[rows] + again[1]
+    for arr, new in zip(out, again, strict=True):
+        arr[rows[took]] = new[took]
+    iterations[rows] = total
+    polished[rows[took]] = True
 
 
 def _report(result: LCPResult, strict: bool, max_iterations: int) -> None:

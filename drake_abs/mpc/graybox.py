@@ -46,11 +46,11 @@ from typing import Literal
 
 import numpy as np
 
-from drake_abs._validation import as_finite_array, check_shape
+from drake_abs._validation import as_count, as_finite_array, check_shape
 from drake_abs.contact.unconverged import UnconvergedPolicy
 from drake_abs.engine import ModelJacobians, Stepper, rollout
 from drake_abs.mpc.policy import MpcPolicy
-from drake_abs.mpc.qp_mpc import QpMpc
+from drake_abs.mpc.qp_mpc import QpMpc, check_bounds
 
 GradientSource = Literal["model", "exact"]
 
@@ -89,6 +89,7 @@ class TrackingCost:
             if np.any(np.isnan(arr)):
                 raise ValueError(f"{name} contains NaN")
             object.__setattr__(self, name, arr)
+        check_bounds(self.x_min, self.x_max, "x_min", "x_max")
         if not (np.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
             raise ValueError(f"penalty_weight must be finite and >= 0; got {self.penalty_weight}")
 
@@ -211,8 +212,7 @@ def closed_loop(
     x0 = as_finite_array(x0, "x0", ndim=(1,))
     spec = controller.spec
     check_shape(x0, (spec.nx,), "x0", "(nx,)")
-    if int(steps) != steps or steps < 1:
-        raise ValueError(f"steps must be an integer >= 1; got {steps!r}")
+    steps = as_count(steps, "steps", minimum=1)
     if gradient not in (None, "model", "exact"):
         raise ValueError(f"gradient must be None, 'model' or 'exact'; got {gradient!r}")
     stepper = plant
@@ -258,16 +258,14 @@ def closed_loop(
 
 def step_size(k: int) -> float:
     """alpha_k = 5e-5 (log k + 2) / (k + 1)^0.75, k >= 1 (see the module docstring)."""
-    if k < 1:
-        raise ValueError(f"k must be >= 1; got {k}")
+    k = as_count(k, "k", minimum=1)
     return 5e-5 * (np.log(k) + 2.0) / (k + 1) ** 0.75
 
 
 def step_size_as_printed(k: int) -> float:
     """alpha_k = 5e-5 log k + 2 / (k + 1)^0.75, the formula as the extracted text prints it
     (diverges on the quadcopter; see the module docstring), k >= 1."""
-    if k < 1:
-        raise ValueError(f"k must be >= 1; got {k}")
+    k = as_count(k, "k", minimum=1)
     return 5e-5 * np.log(k) + 2.0 / (k + 1) ** 0.75
 
 
@@ -374,8 +372,7 @@ def graybox_optimize(
         progress: called with each iterate's record.
     """
     theta = as_finite_array(theta0, "theta0", ndim=(1,))
-    if int(iterations) != iterations or iterations < 0:
-        raise ValueError(f"iterations must be an integer >= 0; got {iterations!r}")
+    iterations = as_count(iterations, "iterations", minimum=0)
     if not (np.isfinite(delta) and delta > 0):
         raise ValueError(f"delta must be finite and > 0; got {delta!r}")
     if not (np.isfinite(bound) and bound > 0):

@@ -58,26 +58,40 @@ class MpcPolicy:
         return out
 
     def act(self, theta, x) -> np.ndarray:
-        """u0 (M, nu) at states x (M, nx)."""
-        return np.stack([s.u0 for s in self._solve(theta, x, False)])
+        """u0 (M, nu) at states x (M, nx) (M = 0 gives an empty (0, nu))."""
+        sols = self._solve(theta, x, False)
+        return _stack([s.u0 for s in sols], (self.nu,))
 
     def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
         """(du0/dx (M, nu, nx), du0/dtheta (M, nu, n_theta)) by solving at x."""
         sols = self._solve(theta, x, True)
-        return np.stack([s.du0_dx for s in sols]), np.stack([s.du0_dtheta for s in sols])
+        return (
+            _stack([s.du0_dx for s in sols], (self.nu, self.nx)),
+            _stack([s.du0_dtheta for s in sols], (self.nu, self.n_params)),
+        )
 
     def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
-        """(g_u du0/dx (M, nx), g_u du0/dtheta (M, n_theta)) by solving at x."""
-        return _products(self._solve(theta, x, True), g_u)
+        """(g_u du0/dx (M, nx), g_u du0/dtheta (M, n_theta)) by solving at x; g_u (M, nu)."""
+        return self._products(self._solve(theta, x, True), g_u)
 
     def pullback(self, theta, x):
         """u0 (M, nu) and the vector-Jacobian product of the same solves (no second solve)."""
         sols = self._solve(theta, x, True)
-        return np.stack([s.u0 for s in sols]), lambda g_u: _products(sols, g_u)
+        return _stack([s.u0 for s in sols], (self.nu,)), lambda g_u: self._products(sols, g_u)
+
+    def _products(self, sols: list[MpcSolution], g_u) -> tuple[np.ndarray, np.ndarray]:
+        try:
+            g_u = np.asarray(g_u, dtype=float)  # not checked finite: a dropped rollout is NaN
+        except (TypeError, ValueError) as err:
+            raise ValueError(
+                f"g_u must be a real numeric array (M, nu); got {type(g_u).__name__}"
+            ) from err
+        check_shape(g_u, (len(sols), self.nu), "g_u", "(M, nu)")
+        g_x = _stack([g @ s.du0_dx for g, s in zip(g_u, sols, strict=True)], (self.nx,))
+        g_th = _stack([g @ s.du0_dtheta for g, s in zip(g_u, sols, strict=True)], (self.n_params,))
+        return g_x, g_th
 
 
-def _products(sols: list[MpcSolution], g_u) -> tuple[np.ndarray, np.ndarray]:
-    g_u = np.asarray(g_u, dtype=float)
-    g_x = np.stack([g @ s.du0_dx for g, s in zip(g_u, sols, strict=True)])
-    g_th = np.stack([g @ s.du0_dtheta for g, s in zip(g_u, sols, strict=True)])
-    return g_x, g_th
+def _stack(rows: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+    """The rows stacked to (M, *shape); an empty (0, *shape) array for M = 0."""
+    return np.stack(rows) if rows else np.zeros((0, *shape))

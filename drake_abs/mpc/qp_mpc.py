@@ -61,6 +61,17 @@ error. Any other status (primal or dual infeasible, maximum iterations, non-conv
 result) gives ``fallback = True`` and the documented fallback control u = clip(u_ref, u_min,
 u_max) (the reference input, e.g. hover, projected on the input box) with zero Jacobians; the
 status is in the record. The control is never NaN.
+
+Verification: OSQP's termination test is relative to the size of G z, so at an absurd (finite)
+state, |x| ~ 1e15, it reported SOLVED for an input 66 rad/s outside the hard box. Every solution
+OSQP calls solved is therefore re-checked on the current data before it is used: all rows to
+OSQP's own primal criterion (eps_abs + eps_rel max(||G z||, ||l, u||)), and the input box rows at
+the scale of the input bounds alone (eps_abs + eps_rel max(1, |bound|), in the scaled inputs w),
+both with a factor ``VERIFY_FACTOR`` = 10 of slack (unpolished solutions of the quadcopter reach
+about 1.1 times the tolerance). A solution that fails is FAILED (retried once from a cold start,
+then the fallback). A state whose prediction A (x - x_ref) reaches OSQP's infinity (1e30) cannot
+be posed (OSQP rejects the update and would return the previous problem's solution): it is
+FAILED without a solve.
 """
 
 from __future__ import annotations
@@ -77,7 +88,7 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from drake_abs._validation import as_finite_array, check_shape
+from drake_abs._validation import as_count, as_finite_array, check_shape
 
 REGULARIZATION = 1e-6
 JacobianMethod = Literal["kkt", "osqp_adjoint"]
@@ -96,7 +107,8 @@ class MpcStatus(enum.IntEnum):
     MAX_ITER_REACHED = 2
     PRIMAL_INFEASIBLE = 3
     DUAL_INFEASIBLE = 4
-    FAILED = 5  # non-convex, time limit, interrupted, unsolved, or a non-finite solution
+    FAILED = 5  # non-convex, time limit, interrupted, unsolved, a non-finite solution, or one
+    # that fails the re-check on the current data (module docstring, "Verification")
 
 
 _OSQP_STATUS = {
@@ -110,6 +122,9 @@ _OSQP_STATUS = {
 }
 
 USABLE = (MpcStatus.SOLVED, MpcStatus.SOLVED_INACCURATE)  # statuses whose solution is applied
+
+OSQP_INFINITY = 1e30  # OSQP treats bounds of at least this magnitude as infinite
+VERIFY_FACTOR = 10.0  # slack on OSQP's tolerance when a returned solution is re-checked
 
 DEFAULT_OSQP_SETTINGS = {
     "eps_abs": 1e-6,
@@ -215,6 +230,21 @@ def riccati_terminal_cost(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
 # the problem
 
 
+def check_bounds(lo: np.ndarray, hi: np.ndarray, lo_name: str, hi_name: str) -> None:
+    """Raise ``ValueError`` naming the bound unless lo <= hi componentwise, with -inf (lower) and
+    +inf (upper) meaning "no bound". A lower bound of +inf or an upper bound of -inf would pin
+    the variable at infinity, which no finite value satisfies (and OSQP rejects), so they are
+    errors rather than an infeasible problem."""
+    for name, v, bad, allowed in ((lo_name, lo, np.inf, "-inf"), (hi_name, hi, -np.inf, "+inf")):
+        if np.any(v == bad):
+            i = int(np.flatnonzero(v == bad)[0])
+            raise ValueError(
+                f"{name} entries must be finite or {allowed} (no bound); got {v[i]} at index {i}"
+            )
+    if np.any(lo > hi):
+        raise ValueError(f"{lo_name} must be <= {hi_name} componentwise")
+
+
 @dataclass(frozen=True)
 class MpcSpec:
     """The MPC problem data (everything except x and theta).
@@ -223,8 +253,10 @@ class MpcSpec:
         A, B: (nx, nx), (nx, nu) linear prediction model in deviations from (x_ref, u_ref).
         horizon: N >= 1.
         x_ref, u_ref: (nx,), (nu,) reference state and input (u_ref: e.g. hover).
-        u_min, u_max: (nu,) input box (absolute units; may be -inf / +inf).
-        x_min, x_max: (nx,) state box (absolute; +-inf where a component is unconstrained).
+        u_min, u_max: (nu,) input box (absolute units; -inf in u_min / +inf in u_max for no
+            bound; +inf in u_min or -inf in u_max is an error).
+        x_min, x_max: (nx,) state box (absolute; -inf / +inf where a component is
+            unconstrained, as for the inputs).
         slack_linear, slack_quadratic: rho_l, rho_q >= 0 of the slack penalty
             rho_q ||s||^2 + rho_l 1's (rho_q > 0 keeps the QP strictly convex).
         soft_state_constraints: soften the state box with slacks (default) or keep it hard.
@@ -248,11 +280,10 @@ class MpcSpec:
         B = as_finite_array(self.B, "B", ndim=(2,)).copy()
         nx, nu = B.shape
         check_shape(A, (nx, nx), "A", "(nx, nx)")
-        if int(self.horizon) != self.horizon or self.horizon < 1:
-            raise ValueError(f"horizon must be an integer >= 1; got {self.horizon!r}")
+        horizon = as_count(self.horizon, "horizon", minimum=1)
         object.__setattr__(self, "A", A)
         object.__setattr__(self, "B", B)
-        object.__setattr__(self, "horizon", int(self.horizon))
+        object.__setattr__(self, "horizon", horizon)
         for name, n in (("x_ref", nx), ("u_ref", nu)):
             v = getattr(self, name)
             v = np.zeros(n) if v is None else as_finite_array(v, name, ndim=(1,)).copy()
@@ -266,8 +297,7 @@ class MpcSpec:
                 check_shape(v, (n,), name, "(nx,)" if n == nx else "(nu,)")
                 if np.any(np.isnan(v)):
                     raise ValueError(f"{name} contains NaN")
-            if np.any(lo > hi):
-                raise ValueError(f"{lo_name} must be <= {hi_name} componentwise")
+            check_bounds(lo, hi, lo_name, hi_name)
             object.__setattr__(self, lo_name, lo)
             object.__setattr__(self, hi_name, hi)
         for name in ("slack_linear", "slack_quadratic"):
@@ -562,22 +592,38 @@ class QpMpc:
             self.set_theta(theta)
         dx0 = x - spec.x_ref
         lower, upper = st.lower.copy(), st.upper.copy()
-        lower[: spec.nx] = upper[: spec.nx] = spec.A @ dx0
+        with np.errstate(over="ignore", invalid="ignore"):
+            b = spec.A @ dx0
+        if not np.all(np.abs(b) < OSQP_INFINITY):
+            # OSQP reads |values| >= 1e30 as infinite and rejects the update: solving anyway
+            # would return the previous problem's solution, so nothing is solved
+            zeros = (np.zeros((spec.nu, spec.nx)), np.zeros((spec.nu, self.n_theta)))
+            return MpcSolution(
+                u0=spec.fallback_input.copy(),
+                status=MpcStatus.FAILED,
+                fallback=True,
+                iterations=0,
+                polished=False,
+                primal_residual=float("nan"),
+                dual_residual=float("nan"),
+                objective=float("nan"),
+                du0_dx=zeros[0] if jacobians else None,
+                du0_dtheta=zeros[1] if jacobians else None,
+            )
+        lower[: spec.nx] = upper[: spec.nx] = b
         self._osqp.update(l=lower, u=upper)
         res = self._osqp.solve(raise_error=False)
         self.solves += 1
-        status = _OSQP_STATUS.get(res.info.status_val, MpcStatus.FAILED)
+        status = self._checked_status(res, lower, upper)
         if status in (MpcStatus.SOLVED_INACCURATE, MpcStatus.MAX_ITER_REACHED, MpcStatus.FAILED):
             # one retry from a cold start: a warm start from a distant state can stall ADMM
             self._osqp.warm_start(x=np.zeros(st.n), y=np.zeros(st.m))
             res = self._osqp.solve(raise_error=False)
             self.retries += 1
-            status = _OSQP_STATUS.get(res.info.status_val, MpcStatus.FAILED)
+            status = self._checked_status(res, lower, upper)
         info = res.info
         z = np.asarray(res.x, dtype=float)
         y = np.asarray(res.y, dtype=float)
-        if status in USABLE and not (np.all(np.isfinite(z)) and np.all(np.isfinite(y))):
-            status = MpcStatus.FAILED
         common = {
             "iterations": int(info.iter),
             "polished": int(info.status_polish) == 1,
@@ -623,6 +669,38 @@ class QpMpc:
             weakly_active=weak,
             **common,
         )
+
+    def _checked_status(self, res, lower: np.ndarray, upper: np.ndarray) -> MpcStatus:
+        """OSQP's status of ``res``, demoted to FAILED when a solution it calls solved is not
+        finite or does not satisfy the current problem's constraints (module docstring:
+        "Verification")."""
+        status = _OSQP_STATUS.get(res.info.status_val, MpcStatus.FAILED)
+        if status not in USABLE:
+            return status
+        z = np.asarray(res.x, dtype=float)
+        y = np.asarray(res.y, dtype=float)
+        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(y))):
+            return MpcStatus.FAILED
+        st = self._st
+        eps_abs, eps_rel = float(self.settings["eps_abs"]), float(self.settings["eps_rel"])
+        gz = st.G @ z
+        excess = np.maximum(lower - gz, 0.0) + np.maximum(gz - upper, 0.0)
+        # every row, to OSQP's own primal criterion on the current data (a stale solution of a
+        # previous problem fails its dynamics rows)
+        finite = np.concatenate([lower[np.isfinite(lower)], upper[np.isfinite(upper)]])
+        size = max(
+            float(np.max(np.abs(gz), initial=0.0)), float(np.max(np.abs(finite), initial=0.0))
+        )
+        if np.max(excess, initial=0.0) > VERIFY_FACTOR * (eps_abs + eps_rel * size):
+            return MpcStatus.FAILED
+        # the hard input box, at the scale of its own bounds (not of the state, which can make
+        # OSQP's relative criterion arbitrarily loose)
+        box = slice(st.n_eq, st.n_eq + st.nu_blk)
+        bounds = np.concatenate([lower[box], upper[box]])
+        size = max(1.0, float(np.max(np.abs(bounds[np.isfinite(bounds)]), initial=0.0)))
+        if np.max(excess[box], initial=0.0) > VERIFY_FACTOR * (eps_abs + eps_rel * size):
+            return MpcStatus.FAILED
+        return status
 
     def _active_set(self, z, y, lower, upper) -> tuple[np.ndarray, int, int]:
         """Indices of the active rows (equalities first, then by row), the number of weakly

@@ -18,6 +18,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
     ModelInstanceIndex,
     PrismaticJoint,
+    QuaternionFloatingJoint,
     RevoluteJoint,
     SpatialInertia,
 )
@@ -30,7 +31,7 @@ from drake_abs.multibody.drake_dynamics import (
     MultibodyContactModel,
     PointContact,
 )
-from drake_abs.multibody.model_files import add_models_without_collisions
+from drake_abs.multibody.model_files import add_models
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 from drake_abs.multibody.scene import ModelSpec, Scene
 from drake_abs.multibody.stepper import ComplementarityStepper
@@ -94,14 +95,20 @@ class SceneModel:
         smoothing: SmoothingPolicy | None = None,
         activation_distance: float | None = None,
         gradient: GradientMode = "total",
+        friction: str | None = None,
         **solver_options,
     ) -> ComplementarityStepper:
         """The scene's batched step, with the scene's smoothing policy and activation distance.
 
         Args:
-            smoothing: replaces the scene's smoothing policy (larger mu: more smoothing).
+            smoothing: replaces the scene's smoothing policy (larger mu: more smoothing). It
+                is used as given at the scene's ``time_step``: the smoothing's
+                ``reference_time_step`` does not rescale it (wrap it in
+                :class:`~drake_abs.contact.smoothing.TimeStepScaled` for that).
             activation_distance: replaces the scene's activation distance (m).
             gradient: ``"frozen"`` or ``"total"`` (see :class:`ComplementarityStepper`).
+            friction: replaces the scene's friction formulation (``"stewart_trinkle"`` or
+                ``"anitescu"``).
             solver_options: passed to the interior-point solver.
         """
         return ComplementarityStepper(
@@ -109,22 +116,29 @@ class SceneModel:
             self.scene.smoothing_policy() if smoothing is None else smoothing,
             gradient,
             self.scene.activation_distance if activation_distance is None else activation_distance,
+            self.scene.friction_model if friction is None else friction,
             **solver_options,
         )
 
 
 def _parse(parser: Parser, path: Path, collisions: bool):
-    if collisions:
-        return parser.AddModels(str(path))
-    return add_models_without_collisions(parser, path)
+    """Parse one model file: its model instances, with the bodies its URDF ``floating`` joints
+    name given a quaternion floating joint of that name (see :func:`add_floating_base_chains`)."""
+    instances, floating = add_models(parser, path, collisions=collisions)
+    plant = parser.plant()
+    for joint, link in floating:
+        body = plant.GetBodyByName(link, instances[0])
+        plant.AddJoint(QuaternionFloatingJoint(joint, plant.world_frame(), body.body_frame()))
+    return instances
 
 
 def add_scene_models(
     plant: MultibodyPlant, scene: Scene, parser: Parser | None = None, *, collisions: bool = True
 ) -> None:
     """Parse the scene's models into ``plant`` (not finalized), with welds, actuators and
-    floating bases (:func:`add_floating_base_chains`); ``collisions=False`` leaves the files'
-    collision geometry out (and draws STL visuals through OBJ copies; see
+    floating bases (a quaternion floating joint where a URDF declares a ``floating`` joint to
+    the world, :func:`add_floating_base_chains` for the other free bodies); ``collisions=False``
+    leaves the files' collision geometry out (and draws STL visuals through OBJ copies; see
     :mod:`drake_abs.multibody.model_files`)."""
     parser = parser or Parser(plant)
     if any(m.file.startswith("example-robot-data:") for m in scene.models):
@@ -164,7 +178,9 @@ def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
     and Euler angles with ``qdot = v`` (the velocities are the angle rates, not the angular
     velocity), so rigid-body libraries and the step's Jacobians need no quaternion or
     angular-velocity map; like any roll-pitch-yaw parametrisation it is singular at
-    pitch = +-pi/2. Returns the names of the bodies given a floating base."""
+    pitch = +-pi/2. Bodies that already have a joint from the world (such as the quaternion
+    floating joint a URDF ``floating`` joint asks for: see :func:`add_scene_models`) keep it.
+    Returns the names of the bodies given a floating base."""
     inboard = {int(plant.get_joint(i).child_body().index()) for i in plant.GetJointIndices()}
     roots = []
     for k in range(plant.num_model_instances()):
@@ -229,4 +245,12 @@ def build_scene_model(scene: Scene | str | Path) -> SceneModel:
             f"scene {scene.name!r}: initial_state q and v must have {plant.num_positions()} and "
             f"{plant.num_velocities()} entries; got {q0.shape} and {v0.shape}"
         )
+    for s in model.quaternion_starts:  # a free body's (qw, qx, qy, qz): unit, to rounding
+        norm = float(np.linalg.norm(q0[s : s + 4]))
+        if not abs(norm - 1.0) <= 1e-3:
+            raise ValueError(
+                f"scene {scene.name!r}: initial_state q[{s}:{s + 4}] is a unit quaternion "
+                f"(qw, qx, qy, qz); got norm {norm:.6g}"
+            )
+        q0[s : s + 4] /= norm
     return SceneModel(scene, plant, model, q0, v0)

@@ -21,6 +21,7 @@ from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
 from drake_abs.multibody.affine_dynamics import AffineDynamics
+from drake_abs.multibody.floating import quaternion_starts
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,9 @@ class ContactModelBase(ABC):
             plant.num_velocities(),
             plant.num_actuators(),
         )
+        #: where each free body's unit quaternion (qw, qx, qy, qz) starts in q: the stepper
+        #: keeps these at unit norm (see :mod:`drake_abs.multibody.floating`)
+        self.quaternion_starts = quaternion_starts(plant)
         self._bodies_d = []
         for c in contacts:
             instance = plant.GetModelInstanceByName(c.model_instance) if c.model_instance else None

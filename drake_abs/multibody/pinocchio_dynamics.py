@@ -7,7 +7,9 @@ frames, gravity) into a ``pinocchio.Model`` with the same generalized coordinate
 joint with degrees of freedom must be a RevoluteJoint or a PrismaticJoint (welds are merged into
 their parent). Then ``qdot = v`` (N = I) and pinocchio's derivatives with respect to q are the
 ones the step needs. Scenes with a free root body get a floating base made of such joints (see
-:func:`drake_abs.multibody.builder.add_floating_base_chains`).
+:func:`drake_abs.multibody.builder.add_floating_base_chains`); a quaternion floating joint (a
+URDF ``floating`` joint, such as the shipped ball's) is not covered: such scenes use the Drake
+dynamics.
 
 :class:`PinocchioContactModel` has the interface of
 :class:`~drake_abs.multibody.drake_dynamics.MultibodyContactModel` and gives the same numbers

@@ -24,14 +24,26 @@ path on disk.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import functools
+import numbers
+import re
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.contact_lcp import FORMULATIONS
+from drake_abs.contact.smoothing import (
+    ContactAware,
+    Exact,
+    Fixed,
+    GaussianMatched,
+    SmoothingPolicy,
+    TimeStepScaled,
+)
 
 _SMOOTHING = {
     "exact": Exact,
@@ -39,6 +51,62 @@ _SMOOTHING = {
     "contact_aware": ContactAware,
     "gaussian_matched": GaussianMatched,
 }
+
+
+# ---------------------------------------------------------------------------------------------
+# type checks: every wrongly typed value names its key (``where`` is "scene 'name'")
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _number(value, where: str, key: str, unit: str = "", *, optional: bool = False):
+    """``value`` as a float, or ``ValueError`` naming ``key`` (booleans and strings are not
+    numbers); None stays None when ``optional``."""
+    if optional and value is None:
+        return None
+    if not _is_number(value):
+        unit = f" ({unit})" if unit else ""
+        null = " or null" if optional else ""
+        raise ValueError(f"{where}: {key} must be a number{unit}{null}; got {value!r}")
+    return float(value)
+
+
+def _numbers(value, where: str, key: str, form: str, size: int | None = None) -> tuple:
+    """``value`` (a list of numbers, of ``size`` entries if given) as a tuple of floats."""
+    ok = isinstance(value, list | tuple | np.ndarray) and (size is None or len(value) == size)
+    if ok and isinstance(value, np.ndarray):
+        ok = value.ndim == 1
+    if not ok or not all(_is_number(x) for x in value):
+        raise ValueError(f"{where}: {key} must be a list of {form}; got {value!r}")
+    return tuple(float(x) for x in value)
+
+
+def _text(value, where: str, key: str, form: str, *, optional: bool = False):
+    if not (isinstance(value, str) or (optional and value is None)):
+        null = " or null" if optional else ""
+        raise ValueError(f"{where}: {key} must be a string ({form}){null}; got {value!r}")
+    return value
+
+
+def _mapping(value, where: str, key: str, form: str) -> dict:
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{where}: {key} must be a mapping ({form}); got {value!r}")
+    return dict(value)
+
+
+class _SceneLoader(yaml.SafeLoader):
+    """YAML's safe loader, except that exponent-only numbers such as ``1e-3`` are numbers (as in
+    YAML 1.2; PyYAML follows YAML 1.1 and reads them as strings, which the type checks would
+    reject)."""
+
+
+_SceneLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
 
 
 #: The folder of the scenes shipped with the package.
@@ -95,13 +163,24 @@ class Scene:
             LCP. Under exact contact this changes nothing; under smoothing it drops their force
             at a distance (about mu / distance each) and, for ContactAware, their say in mu.
         smoothing: ``{"kind": "exact" | "fixed" | "contact_aware" | "gaussian_matched", ...}``
-            with the policy's parameters; larger mu is smoother.
+            with the policy's parameters; larger mu is smoother. Optional
+            ``reference_time_step`` (s): the step mu was stated at (default: ``time_step``).
+            At another ``time_step`` mu is multiplied by ``time_step / reference_time_step``
+            (:class:`~drake_abs.contact.smoothing.TimeStepScaled`), so that a resting body's
+            barrier gap and the barrier's force law stay those of the reference step (mu is an
+            impulse times a distance, m N s: at a fixed mu the rest gap grows like 1 / h).
+            Not for ``gaussian_matched``.
         initial_state: ``{"q": [...], "v": [...]}`` (defaults: the plant's default state).
         dynamics: who evaluates M, the bias terms, the contact Jacobians and their derivatives:
             ``"pinocchio"`` (analytic derivatives; revolute, prismatic and weld joints, which
             includes this package's floating bases), ``"drake"`` (the MultibodyPlant itself,
             AutoDiffXd for derivatives; any joint), or ``"auto"`` (pinocchio where it applies).
             Both give the same numbers (tested); pinocchio is much faster.
+        friction_model: ``"stewart_trinkle"`` (the papers' linearised-cone LCP; exact Coulomb
+            friction, but not monotone: under smoothing its solves can fail) or
+            ``"anitescu"`` (the convex relaxation: a monotone LCP that converges under every
+            smoothing; a sliding contact lifts off at ``friction x |v_t|``). See
+            :class:`drake_abs.contact.contact_lcp.FrictionCone` and docs/math.md section 6b.
     """
 
     name: str
@@ -115,8 +194,15 @@ class Scene:
     smoothing: dict = field(default_factory=lambda: {"kind": "exact"})
     initial_state: dict = field(default_factory=dict)
     dynamics: str = "auto"
+    friction_model: str = "stewart_trinkle"
 
     def __post_init__(self):
+        self._check_types()
+        if self.friction_model not in FORMULATIONS:
+            raise ValueError(
+                f"scene {self.name!r}: friction_model must be one of {FORMULATIONS}; got "
+                f"{self.friction_model!r}"
+            )
         if self.dynamics not in DYNAMICS:
             raise ValueError(
                 f"scene {self.name!r}: dynamics must be one of {DYNAMICS}; got {self.dynamics!r}"
@@ -166,21 +252,124 @@ class Scene:
                 raise ValueError(f"scene {self.name!r}: initial_state {key} must be finite")
         self.smoothing_policy()  # validates the smoothing parameters now, not at the first step
 
+    def _check_types(self) -> None:
+        """Raise ``ValueError`` naming the key of any wrongly typed value; store numbers as
+        floats and lists as tuples (a scene from YAML or from the constructor alike)."""
+        if not isinstance(self.name, str):
+            raise ValueError(f"scene name must be a string; got {self.name!r}")
+        where = f"scene {self.name!r}"
+        put = functools.partial(object.__setattr__, self)
+        put("time_step", _number(self.time_step, where, "time_step", "s"))
+        k = self.friction_directions
+        if not (isinstance(k, numbers.Integral) and not isinstance(k, bool)):
+            raise ValueError(
+                f"{where}: friction_directions must be an integer >= 2 (tangent directions "
+                f"per contact); got {k!r}"
+            )
+        put("friction_directions", int(k))
+        put(
+            "ground_normal",
+            _numbers(self.ground_normal, where, "ground_normal", "3 numbers [nx, ny, nz]", 3),
+        )
+        put("ground_height", _number(self.ground_height, where, "ground_height", "m"))
+        put(
+            "activation_distance",
+            _number(self.activation_distance, where, "activation_distance", "m; .inf for none"),
+        )
+        _text(self.dynamics, where, "dynamics", f"one of {DYNAMICS}")
+        _text(self.friction_model, where, "friction_model", f"one of {FORMULATIONS}")
+        if not isinstance(self.models, list | tuple):
+            raise ValueError(
+                f"{where}: models must be a list of model entries; got {self.models!r}"
+            )
+        models = []
+        for i, m in enumerate(self.models):
+            key = f"models[{i}]"
+            if not isinstance(m, ModelSpec):
+                raise ValueError(f"{where}: {key} must be a ModelSpec; got {m!r}")
+            _text(m.file, where, f"{key}.file", "a model file path")
+            _text(m.name, where, f"{key}.name", "a model instance name", optional=True)
+            _text(m.weld, where, f"{key}.weld", "a frame name", optional=True)
+            if not (
+                isinstance(m.actuate, list | tuple) and all(isinstance(j, str) for j in m.actuate)
+            ):
+                raise ValueError(
+                    f"{where}: {key}.actuate must be a list of joint names; got {m.actuate!r}"
+                )
+            models.append(replace(m, actuate=tuple(m.actuate)))
+        put("models", tuple(models))
+        if not isinstance(self.contacts, list | tuple):
+            raise ValueError(
+                f"{where}: contacts must be a list of contact entries; got {self.contacts!r}"
+            )
+        contacts = []
+        for i, c in enumerate(self.contacts):
+            key = f"contacts[{i}]"
+            if not isinstance(c, ContactSpec):
+                raise ValueError(f"{where}: {key} must be a ContactSpec; got {c!r}")
+            _text(c.body, where, f"{key}.body", "a body name")
+            _text(c.model, where, f"{key}.model", "a model instance name", optional=True)
+            if not isinstance(c.points, list | tuple):
+                raise ValueError(
+                    f"{where}: {key}.points must be a list of [x, y, z] points "
+                    f"(m); got {c.points!r}"
+                )
+            points = tuple(
+                _numbers(p, where, f"{key}.points[{j}]", "3 finite coordinates [x, y, z] (m)", 3)
+                for j, p in enumerate(c.points)
+            )
+            radius = _number(c.radius, where, f"{key}.radius", "m")
+            friction = _number(
+                c.friction, where, f"{key}.friction", "Coulomb coefficient", optional=True
+            )
+            contacts.append(replace(c, points=points, radius=radius, friction=friction))
+        put("contacts", tuple(contacts))
+        smoothing = _mapping(self.smoothing, where, "smoothing", "{kind: ..., parameters...}")
+        _text(
+            smoothing.get("kind", "exact"), where, "smoothing.kind", f"one of {sorted(_SMOOTHING)}"
+        )
+        for name, value in smoothing.items():
+            if name != "kind" and not callable(value):
+                _number(value, where, f"smoothing.{name}")
+        state = _mapping(self.initial_state, where, "initial_state", "{q: [...], v: [...]}")
+        for name, values in state.items():
+            if name in ("q", "v"):
+                state[name] = _numbers(values, where, f"initial_state.{name}", "numbers")
+        put("initial_state", state)
+
     def smoothing_policy(self) -> SmoothingPolicy:
-        """The smoothing policy object this scene names."""
+        """The smoothing policy object this scene names, at this scene's time step: when the
+        smoothing states a ``reference_time_step`` other than ``time_step``, the named policy
+        wrapped in :class:`~drake_abs.contact.smoothing.TimeStepScaled` (mu times
+        ``time_step / reference_time_step``)."""
+        where = f"scene {self.name!r}"
         spec = dict(self.smoothing)
         kind = spec.pop("kind", "exact")
+        reference = spec.pop("reference_time_step", None)
         if kind not in _SMOOTHING:
             raise ValueError(
-                f"scene {self.name!r}: smoothing kind must be one of {sorted(_SMOOTHING)}; "
-                f"got {kind!r}"
+                f"{where}: smoothing kind must be one of {sorted(_SMOOTHING)}; got {kind!r}"
             )
         try:
-            return _SMOOTHING[kind](**spec)
+            policy = _SMOOTHING[kind](**spec)
         except TypeError as err:
+            raise ValueError(f"{where}: bad smoothing parameters {spec}: {err}") from err
+        except ValueError as err:
+            raise ValueError(f"{where}: smoothing: {err}") from err
+        if reference is None:
+            return policy
+        reference = _number(reference, where, "smoothing.reference_time_step", "s")
+        if not (np.isfinite(reference) and reference > 0):
             raise ValueError(
-                f"scene {self.name!r}: bad smoothing parameters {spec}: {err}"
-            ) from err
+                f"{where}: smoothing.reference_time_step must be a finite number > 0 (s); got "
+                f"{reference!r}"
+            )
+        if kind == "gaussian_matched":
+            raise ValueError(
+                f"{where}: smoothing.reference_time_step does not apply to gaussian_matched "
+                "(its impulse does not scale with mu; choose sigma for the time step)"
+            )
+        return TimeStepScaled.between(policy, self.time_step, reference)
 
     @property
     def num_contacts(self) -> int:
@@ -195,35 +384,31 @@ class Scene:
         unknown = set(data) - set(cls.__dataclass_fields__)
         if unknown:
             raise ValueError(f"unknown scene keys {sorted(unknown)}")
+        where = f"scene {data.get('name')!r}"
+        if "name" not in data:
+            raise ValueError("a scene needs a name")
         for kind, spec in (("models", ModelSpec), ("contacts", ContactSpec)):
+            if not isinstance(data.get(kind, ()), list | tuple):
+                raise ValueError(f"{where}: {kind} must be a list of mappings; got {data[kind]!r}")
             for i, entry in enumerate(data.get(kind, ())):
                 if not isinstance(entry, dict):
-                    raise ValueError(f"{kind}[{i}] must be a mapping; got {entry!r}")
+                    raise ValueError(f"{where}: {kind}[{i}] must be a mapping; got {entry!r}")
                 bad = set(entry) - set(spec.__dataclass_fields__)
                 if bad:
                     raise ValueError(
-                        f"unknown keys {sorted(bad)} in {kind}[{i}]; expected some of "
+                        f"{where}: unknown keys {sorted(bad)} in {kind}[{i}]; expected some of "
                         f"{sorted(spec.__dataclass_fields__)}"
                     )
-        models = tuple(
-            ModelSpec(**{**m, "actuate": tuple(m.get("actuate", ()))})
-            for m in data.pop("models", ())
-        )
-        contacts = []
-        for i, c in enumerate(data.pop("contacts", ())):
-            try:
-                points = tuple(tuple(map(float, p)) for p in c["points"])
-            except (KeyError, TypeError, ValueError) as err:
-                raise ValueError(
-                    f"contacts[{i}].points must be a list of [x, y, z] numbers (m): {err}"
-                ) from err
-            contacts.append(ContactSpec(**{**c, "points": points}))
-        contacts = tuple(contacts)
-        if "ground_normal" in data:
-            data["ground_normal"] = tuple(float(x) for x in data["ground_normal"])
-        for key in ("time_step", "ground_height", "activation_distance"):
-            if key in data:
-                data[key] = float(data[key])
+        for i, m in enumerate(data.get("models", ())):
+            if "file" not in m:
+                raise ValueError(f"{where}: models[{i}] needs a file")
+        for i, c in enumerate(data.get("contacts", ())):
+            for key in ("body", "points"):
+                if key not in c:
+                    raise ValueError(f"{where}: contacts[{i}] needs {key}")
+        # the values' types are checked (and numbers made floats) by the Scene itself
+        models = tuple(ModelSpec(**m) for m in data.pop("models", ()))
+        contacts = tuple(ContactSpec(**c) for c in data.pop("contacts", ()))
         return cls(models=models, contacts=contacts, **data)
 
     @classmethod
@@ -246,7 +431,7 @@ class Scene:
     def from_yaml(cls, source: str | Path) -> Scene:
         """Load from a YAML file path or a YAML string."""
         text = Path(source).read_text() if Path(str(source)).suffix in (".yaml", ".yml") else source
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_SceneLoader)
         if not isinstance(data, dict):
             raise ValueError("a scene YAML must be a mapping at the top level")
         return cls.from_dict(data)

@@ -14,11 +14,12 @@ import warnings
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import ParameterDerivatives, contact_step
+from drake_abs.contact.contact_lcp import FORMULATIONS, ParameterDerivatives, contact_step
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.multibody.drake_dynamics import ContactModelBase
+from drake_abs.multibody.floating import normalize_quaternions
 
 #: how deep (m) a candidate left out of a step's LCP may end below the ground before the step
 #: is solved again with it (see ``ComplementarityStepper._repair``)
@@ -40,6 +41,10 @@ class ComplementarityStepper:
         gradient: ``"frozen"`` or ``"total"`` (see
             :func:`drake_abs.contact.contact_lcp.contact_step`).
         activation_distance: candidates farther than this (m) are left out of the LCP.
+        friction: the friction formulation, ``"stewart_trinkle"`` (default, the papers') or
+            ``"anitescu"`` (monotone; converges under every smoothing, but a sliding contact
+            lifts off at ``alpha |v_t|``): see
+            :class:`~drake_abs.contact.contact_lcp.FrictionCone`.
         solver_options: passed to the interior-point solver.
     """
 
@@ -49,9 +54,13 @@ class ComplementarityStepper:
         smoothing: SmoothingPolicy | None = None,
         gradient: GradientMode = "total",
         activation_distance: float = float("inf"),
+        friction: str = "stewart_trinkle",
         **solver_options,
     ):
         check_gradient_mode(gradient)
+        if friction not in FORMULATIONS:
+            raise ValueError(f"friction must be one of {FORMULATIONS}; got {friction!r}")
+        self.friction = friction
         self.model = model
         self.smoothing = Exact() if smoothing is None else smoothing
         self.gradient = gradient
@@ -138,6 +147,8 @@ class ComplementarityStepper:
         out = self._solve(q, v, u, active, groups, jacobians, parameters)
         if pruned:
             self._repair(q, v, u, active, out, jacobians, parameters)
+        # free bodies' quaternions back to unit norm, Jacobians chained (multibody/floating.py)
+        normalize_quaternions(out, getattr(self.model, "quaternion_starts", ()))
         finite = np.isfinite(out["x_next"]).all(axis=1)
         for key in ("dx_dx", "dx_du", "dx_dtheta") if jacobians else ():
             if key in out:
@@ -153,6 +164,17 @@ class ComplementarityStepper:
             )
         names = self.parameter_names if parameters else ()
         return Step(active=active, theta_names=names, **out)
+
+    def _cone(self, idx: np.ndarray):
+        """The friction cone of the candidates ``idx`` under this stepper's formulation."""
+        cone = self.model.cone_for(idx)
+        if cone.formulation == self.friction:
+            return cone
+        cache = self.__dict__.setdefault("_cones", {})
+        key = np.asarray(idx, dtype=np.int64).tobytes()
+        if key not in cache:
+            cache[key] = cone.with_formulation(self.friction)
+        return cache[key]
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: bool) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc) in the LCP, one
@@ -182,7 +204,7 @@ class ComplementarityStepper:
         for rows, idx, quant in groups:
             if quant is None:
                 quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
-            cone = self.model.cone_for(idx)
+            cone = self._cone(idx)
             par = None
             if parameters:
                 par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows])

@@ -20,8 +20,10 @@ def test_exact_solves_converge_superlinearly_in_the_final_iterations(monkeypatch
     full = solve_lcp(F, q, 0.0)
     assert full.converged.all()
     ratios = []
-    # stopped early on purpose: the kernel's own iterations, without the second starts
+    # stopped early on purpose: the kernel's own iterations, without the second starts or the
+    # crossover (which would finish the stopped problems by pivoting)
     monkeypatch.setattr(ipm, "SECOND_START", False)
+    monkeypatch.setattr(ipm, "POLISH", False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)
         for b, n in enumerate(full.iterations):
@@ -47,6 +49,7 @@ def test_ill_conditioned_positive_definite_problems_converge(mu, monkeypatch):
     assert r.converged.all()
     assert np.all(r.lam >= 0) and np.all(r.slack >= 0)
     monkeypatch.setattr(ipm, "SECOND_START", False)
+    monkeypatch.setattr(ipm, "POLISH", False)  # the default start alone
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)
         assert not solve_lcp(F, q, mu).converged.all()  # the case does occur

@@ -3,18 +3,10 @@
 import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from moby_reference import moby
 from numdiff import random_p_matrix
-from pydrake.solvers import MathematicalProgram, MobyLcpSolver
 
 from drake_abs import solve_lcp
-
-
-def moby(F, q):
-    prog = MathematicalProgram()
-    z = prog.NewContinuousVariables(len(q))
-    prog.AddLinearComplementarityConstraint(F, q, z)
-    result = MobyLcpSolver().Solve(prog)
-    return result.is_success(), result.GetSolution(z)
 
 
 @settings(max_examples=40)

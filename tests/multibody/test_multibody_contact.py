@@ -63,9 +63,11 @@ SCENES = {
 
 @pytest.mark.parametrize("scene", SCENES, ids=SCENES.keys())
 @pytest.mark.parametrize("policy", [Exact(), Fixed(1e-5), ContactAware(1e-3, 0.02, 1e-9)], ids=repr)
-def test_multibody_step_jacobian_matches_finite_differences(scene, policy):
+@pytest.mark.parametrize("friction", ["stewart_trinkle", "anitescu"])
+def test_multibody_step_jacobian_matches_finite_differences(scene, policy, friction):
     path, contacts, k, q, v = SCENES[scene]
     model = MultibodyContactModel(load(path), contacts, GroundPlane(), H, directions=k)
+    model.cone = model.cone.with_formulation(friction)
     nq, nv, nu = model.nq, model.nv, model.nu
     u = np.full(nu, 2.0)
     r = contact_step(

@@ -175,3 +175,146 @@ def test_hostile_scene_files_are_refused_naming_the_key(change, match):
     change(data)
     with pytest.raises(ValueError, match=match):
         Scene.from_dict(data)
+
+
+def _set_contact(**kw):
+    return lambda d: d["contacts"][0].update(**kw)
+
+
+def _set_model(**kw):
+    return lambda d: d["models"][0].update(**kw)
+
+
+def _set_smoothing(kind, **kw):
+    return lambda d: d.update(smoothing={"kind": kind, **kw})
+
+
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [
+        (lambda d: d.update(time_step="abc"), "time_step"),
+        (lambda d: d.update(time_step=True), "time_step"),
+        (lambda d: d.update(friction_directions="x"), "friction_directions"),
+        (lambda d: d.update(friction_directions=2.5), "friction_directions"),
+        (lambda d: d.update(ground_normal="up"), "ground_normal"),
+        (lambda d: d.update(ground_normal=[0, 0, "1"]), "ground_normal"),
+        (lambda d: d.update(ground_height=[1]), "ground_height"),
+        (lambda d: d.update(activation_distance="far"), "activation_distance"),
+        (lambda d: d.update(name=5), "name"),
+        (lambda d: d.update(models="drake_abs:models/box_planar.sdf"), "models"),
+        (lambda d: d.update(contacts={"body": "box"}), "contacts"),
+        (_set_contact(radius="big"), r"contacts\[0\].radius"),
+        (_set_contact(friction="high"), r"contacts\[0\].friction"),
+        (_set_contact(points=[["0", "0", "0"]]), r"contacts\[0\].points"),
+        (_set_contact(points=["123"]), r"contacts\[0\].points"),
+        (_set_contact(points="abc"), r"contacts\[0\].points"),
+        (_set_contact(body=3), r"contacts\[0\].body"),
+        (_set_contact(model=[1]), r"contacts\[0\].model"),
+        (_set_model(file=3), r"models\[0\].file"),
+        (_set_model(actuate="hip"), r"models\[0\].actuate"),
+        (_set_model(actuate=5), r"models\[0\].actuate"),
+        (_set_model(name=[1]), r"models\[0\].name"),
+        (_set_model(weld=2), r"models\[0\].weld"),
+        (lambda d: d.update(smoothing="fixed"), "smoothing"),
+        (lambda d: d.update(smoothing={"kind": 3}), "smoothing.kind"),
+        (lambda d: d.update(smoothing={"kind": "fixed", "value": "big"}), "smoothing.value"),
+        (_set_smoothing("contact_aware", mu_max=[1], length=0.1), "smoothing.mu_max"),
+        (_set_smoothing("fixed", value=1e-3, reference_time_step="0.01"), "reference_time_step"),
+        (lambda d: d.update(dynamics=3), "dynamics"),
+        (lambda d: d.update(friction_model=["anitescu"]), "friction_model"),
+        (lambda d: d.update(initial_state=[1, 2]), "initial_state"),
+        (lambda d: d.update(initial_state={"q": "abc"}), r"initial_state.q"),
+        (lambda d: d.update(initial_state={"q": [0, "a", 0]}), r"initial_state.q"),
+        (lambda d: d.update(initial_state={"v": 5}), r"initial_state.v"),
+    ],
+)
+def test_wrongly_typed_scene_values_are_refused_naming_the_key(change, key):
+    """Issue 13: each of these failed with a message that did not name the key (or was taken
+    silently: a string ``actuate`` became its letters, a string point its digits)."""
+    data = yaml.safe_load((PACKAGE_DIR / "scenes" / "box_push.yaml").read_text())
+    change(data)
+    with pytest.raises(ValueError, match=key) as err:
+        Scene.from_dict(data)
+    if key != "name":
+        assert "scene 'box_push'" in str(err.value)
+
+
+def test_initial_state_of_the_wrong_length_is_refused_when_the_plant_is_built():
+    data = yaml.safe_load((PACKAGE_DIR / "scenes" / "box_push.yaml").read_text())
+    data["initial_state"] = {"q": [0.0, 0.1]}
+    with pytest.raises(ValueError, match="initial_state q"):
+        build_scene_model(Scene.from_dict(data))
+
+
+def test_yaml_exponent_numbers_are_numbers_and_quoted_ones_are_not():
+    """PyYAML reads ``1e-3`` (no dot) as a string; scene files read it as the number."""
+    text = BOX.read_text().replace("time_step: 0.01", "time_step: 1e-2")
+    assert Scene.from_yaml(text).time_step == 0.01
+    with pytest.raises(ValueError, match="time_step"):
+        Scene.from_yaml(text.replace("time_step: 1e-2", "time_step: '1e-2'"))
+
+
+def test_scenes_built_in_python_are_checked_and_normalised_too():
+    scene = Scene.from_yaml(BOX)
+    same = Scene(**{**scene.__dict__, "time_step": 1, "ground_normal": [0, 0, 1]})
+    assert same.time_step == 1.0 and isinstance(same.time_step, float)
+    assert same.ground_normal == (0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match="ground_height"):
+        Scene(**{**scene.__dict__, "ground_height": "0"})
+
+
+def _barrier_box(time_step: float, reference_time_step: float | None) -> Scene:
+    """The box under ContactAware(1e-2, 0.05), every corner in the LCP."""
+    smoothing = {"kind": "contact_aware", "mu_max": 1e-2, "length": 0.05}
+    if reference_time_step is not None:
+        smoothing["reference_time_step"] = reference_time_step
+    data = {**Scene.from_yaml(BOX).to_dict(), "time_step": time_step, "smoothing": smoothing}
+    return Scene.from_dict({**data, "activation_distance": float("inf")})
+
+
+def test_reference_time_step_wraps_the_scene_policy_and_reaches_the_stepper():
+    from drake_abs.contact.smoothing import TimeStepScaled
+
+    scene = _barrier_box(1e-3, 0.01)
+    policy = scene.smoothing_policy()
+    assert isinstance(policy, TimeStepScaled) and policy.scale == pytest.approx(0.1)
+    assert policy.policy == ContactAware(1e-2, 0.05)
+    assert build_scene_model(scene).stepper().smoothing == policy
+    assert Scene.from_yaml(scene.to_yaml()) == scene
+    assert _barrier_box(0.01, 0.01).smoothing_policy() == ContactAware(1e-2, 0.05)
+    assert _barrier_box(1e-3, None).smoothing_policy() == ContactAware(1e-2, 0.05)
+    gaussian = {"kind": "gaussian_matched", "sigma": 0.002, "reference_time_step": 0.01}
+    with pytest.raises(ValueError, match="reference_time_step"):
+        Scene.from_dict({**scene.to_dict(), "smoothing": gaussian})
+    negative = {"kind": "fixed", "value": 1e-3, "reference_time_step": -0.01}
+    with pytest.raises(ValueError, match="reference_time_step"):
+        Scene.from_dict({**scene.to_dict(), "smoothing": negative})
+
+
+def _box_heights(scene: Scene, x0: np.ndarray, duration: float):
+    """The box's heights z (m) per step from x0, and the last state."""
+    sm = build_scene_model(scene)
+    stepper = sm.stepper()
+    x, u = x0[None], np.zeros((1, sm.contact_model.nu))
+    z = []
+    for _ in range(int(round(duration / scene.time_step))):
+        step = stepper.step(x, u, jacobians=False)
+        assert step.converged.all()
+        x = step.x_next
+        z.append(x[0, 1])
+    return np.array(z), x[0]
+
+
+def test_a_box_resting_on_the_barrier_is_not_launched_at_a_finer_step():
+    """Settled at h = 10 ms the box floats 6.6 cm up (z = 0.1665 m). At h = 1 ms with the
+    smoothing stated at 10 ms it stays there (measured: max z 0.1674 m); stated at 1 ms (the
+    default reference, the same mu) it is thrown to 0.50 m."""
+    rest = _barrier_box(0.01, None)
+    sm = build_scene_model(rest)
+    _, x_rest = _box_heights(rest, np.concatenate([sm.q0, np.zeros(3)]), 3.0)
+    z_rest = x_rest[1]
+    assert 0.15 < z_rest < 0.18 and abs(x_rest[4]) < 0.01  # floating, nearly still
+    scaled, _ = _box_heights(_barrier_box(1e-3, 0.01), x_rest, 0.3)
+    assert scaled.max() < z_rest + 0.002 and scaled[-1] == pytest.approx(z_rest, abs=0.002)
+    unscaled, _ = _box_heights(_barrier_box(1e-3, None), x_rest, 0.3)
+    assert unscaled.max() > z_rest + 0.2

@@ -29,13 +29,13 @@ from drake_abs.multibody.scene import Scene
 
 G = 9.81
 SCENES_DIR = PACKAGE_DIR / "scenes"
-# scene: (nq = nv, nu, contact candidates)
+# scene: (nq, nv, nu, contact candidates); the ball floats on a quaternion (nq = nv + 1)
 SIZES = {
-    "ball_throw": (6, 0, 1),
-    "box_push": (3, 1, 4),
-    "hopper": (5, 2, 1),
-    "half_cheetah": (9, 6, 4),
-    "solo12_drop": (18, 12, 4),
+    "ball_throw": (7, 6, 0, 1),
+    "box_push": (3, 3, 1, 4),
+    "hopper": (5, 5, 2, 1),
+    "half_cheetah": (9, 9, 6, 4),
+    "solo12_drop": (18, 18, 12, 4),
 }
 
 
@@ -46,15 +46,17 @@ def scene_model(name):
 
 def test_every_shipped_scene_loads_and_builds():
     assert {p.stem for p in SCENES_DIR.glob("*.yaml")} == set(SIZES)
-    for name, (n, nu, nc) in SIZES.items():
+    for name, (nq, nv, nu, nc) in SIZES.items():
         scene = Scene.from_yaml(SCENES_DIR / f"{name}.yaml")
         assert scene.name == name
         assert Scene.from_yaml(scene.to_yaml()) == scene
         sm = scene_model(name)
         plant = sm.plant
-        assert (plant.num_positions(), plant.num_velocities(), plant.num_actuators()) == (n, n, nu)
+        assert (plant.num_positions(), plant.num_velocities(), plant.num_actuators()) == (
+            nq, nv, nu
+        )  # fmt: skip
         assert len(sm.contact_model.contacts) == nc == scene.num_contacts
-        assert sm.q0.shape == sm.v0.shape == (n,)
+        assert sm.q0.shape == (nq,) and sm.v0.shape == (nv,)
         # nothing starts below the ground
         assert sm.contact_model.distances(sm.q0[None]).min() > -1e-12
 
@@ -123,12 +125,14 @@ def test_ball_lands_and_rolls_at_five_sevenths_of_its_speed():
     v_y = -r w_x, about the x axis only."""
     xs, impulses, _ = rollout("ball_throw")
     r = 0.05
-    q, v = xs[-1, :6], xs[-1, 6:]  # q = (x, y, z, yaw, pitch, roll), v = their rates
+    # q = (qw, qx, qy, qz, x, y, z), v = (wx, wy, wz, vx, vy, vz) (world frame)
+    quat, p, w, v = xs[-1, :4], xs[-1, 4:7], xs[-1, 7:10], xs[-1, 10:]
     assert impulses[:25].max() < 1e-12 and impulses[-1, 0] > 1e-3  # flies, then on the ground
-    assert q[2] == pytest.approx(r, abs=1e-9) and abs(v[2]) < 1e-9
+    assert p[2] == pytest.approx(r, abs=1e-9) and abs(v[2]) < 1e-9
     assert v[1] == pytest.approx(5 / 7, abs=1e-9)
-    assert v[1] + r * v[5] == pytest.approx(0, abs=1e-9)  # rolling: the contact point is still
-    np.testing.assert_allclose([q[0], q[3], q[4], v[0], v[3], v[4]], 0, atol=1e-12)
+    assert v[1] + r * w[0] == pytest.approx(0, abs=1e-9)  # rolling: the contact point is still
+    np.testing.assert_allclose([p[0], v[0], w[1], w[2], quat[2], quat[3]], 0, atol=1e-12)
+    assert np.linalg.norm(xs[:, :4], axis=1) == pytest.approx(1.0, abs=1e-14)  # unit quaternion
 
 
 def test_pushed_box_decelerates_as_discrete_coulomb_and_stays_stuck():
@@ -206,6 +210,12 @@ def _half_cheetah_state():
     return _x(q, [2.0, -0.3, 0, 0, 0, -20.0, 0, 0, 0])
 
 
+# the ball's orientation in the finite-difference states: a unit quaternion (qw, qx, qy, qz)
+# well away from the identity (the central differences move all four entries, off the unit
+# sphere too: the step projects back onto it, and its Jacobian says so)
+_TILT = tuple(np.array([0.8, 0.3, -0.4, 0.2]) / np.linalg.norm([0.8, 0.3, -0.4, 0.2]))
+
+
 # scene: {label: (x, u)}. "contact": a contact is pressed, and it slides (a sticking contact is
 # non-degenerate only through the friction regularisation's ~1e-9 slacks, and a sticking ball
 # with no sideways load is degenerate in the unloaded directions). Single-contact scenes also
@@ -214,9 +224,12 @@ def _half_cheetah_state():
 FD_STATES = {
     "ball_throw": {
         # landing at 0.3 m/s while moving at 1 m/s: too little normal impulse to stop the slip
-        # (x = (x, y, z, yaw, pitch, roll) and their rates)
-        "contact": lambda: (_x([0, 0, 0.0505, 0, 0, 0], [0, 1.0, -0.3, 0, 0, 0]), np.zeros(0)),
-        "approach": lambda: (_x([0, 0, 0.06, 0, 0, 0], [0, 1.0, -0.5, 0, 0, 2.0]), np.zeros(0)),
+        # (q = (qw, qx, qy, qz, x, y, z), v = (wx, wy, wz, vx, vy, vz); tilted, spinning)
+        "contact": lambda: (
+            _x([*_TILT, 0, 0, 0.0505], [0.5, -0.3, 2.0, 0, 1.0, -0.3]),
+            np.zeros(0),
+        ),
+        "approach": lambda: (_x([*_TILT, 0, 0, 0.06], [2.0, 0.3, -1.0, 0, 1.0, -0.5]), np.zeros(0)),
     },
     "box_push": {
         # tilted 0.1 rad, landing on its right corner (the left one 4 cm up), sliding

@@ -92,10 +92,10 @@ def test_pruning_never_lets_a_fast_impact_through():
     full = model.stepper(activation_distance=np.inf)
     heights = np.repeat([0.06, 0.15, 0.2, 0.5, 1.2], 4)
     speeds = np.tile([1.0, 15.0, 50.0, 100.0], 5)
-    x = np.tile(model.x0, (heights.size, 1))
-    x[:, 2], x[:, nq:] = heights, 0.0
-    x[:, nq + 2] = -speeds
-    x[:, nq + 1] = 2.0  # and sliding sideways
+    x = np.tile(model.x0, (heights.size, 1))  # q = (quaternion, x, y, z), v = (w, vx, vy, vz)
+    x[:, 6], x[:, nq:] = heights, 0.0
+    x[:, nq + 5] = -speeds
+    x[:, nq + 4] = 2.0  # and sliding sideways
     for _ in range(20):
         a = pruned.step(x, np.zeros((len(x), cm.nu)), jacobians=False)
         b = full.step(x, np.zeros((len(x), cm.nu)), jacobians=False)
@@ -113,9 +113,9 @@ def test_a_step_that_runs_out_of_repairs_is_flagged(monkeypatch):
     monkeypatch.setattr(stepper_module, "MAX_REPAIRS", 0)
     model = build_scene_model("ball_throw")
     nq = model.contact_model.nq
-    x = model.x0.copy()
-    x[2], x[nq:] = 0.5, 0.0
-    x[nq + 2] = -100.0
+    x = model.x0.copy()  # q = (quaternion, x, y, z), v = (w, vx, vy, vz)
+    x[6], x[nq:] = 0.5, 0.0
+    x[nq + 5] = -100.0
     for _ in range(3):
         with pytest.warns(stepper_module.StepOverflowWarning, match="repairs"):
             r = model.stepper().step(x[None], np.zeros((1, model.contact_model.nu)))

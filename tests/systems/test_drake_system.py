@@ -147,11 +147,16 @@ def _one_autodiff_step(plant, x0, u):
     return x, g, ad.converged_port.Eval(context)[0].value()
 
 
-def test_unconverged_step_derivatives_are_dropped_flagged_or_raised():
+def test_unconverged_step_derivatives_are_dropped_flagged_or_raised(monkeypatch):
     from dataclasses import replace
 
     from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
+    from drake_abs.lcp import ipm
     from drake_abs.lcp.ipm import LCPConvergenceWarning
+
+    # the solver's crossover (drake_abs.lcp.pivoting) would solve the starved step exactly and
+    # verify it: this test needs a step that stays unconverged
+    monkeypatch.setattr(ipm, "POLISH", False)
 
     good = point_mass_lcs(2, time_step=H)
     starved = replace(good, solver_options={**good.solver_options, "max_iterations": 2})
