@@ -82,8 +82,9 @@ class FrictionCone:
             of at most eps times the tangential velocity change the impulse causes; measured on
             the resting box it took failures at rest from 16 of 100 steps to 0 and left the
             trajectory unchanged to 1e-6 m. Its weight is held constant when differentiating.
-            Under ``"anitescu"`` it applies to every generator row, relative to their mean
-            diagonal (it makes the generator split unique at a sticking contact).
+            Under ``"anitescu"`` it applies to every generator row, relative to that row's own
+            diagonal (it makes the generator split unique at a sticking contact; being local,
+            it lets pruning leave an exact step unchanged).
         formulation: how the friction cone enters the LCP (docs/math.md section 6b):
 
             - ``"stewart_trinkle"`` (default; the papers' eqs.): normal, tangent and cone rows as
@@ -97,7 +98,10 @@ class FrictionCone:
               separates at ``alpha |v_t|`` (a lift of about ``alpha |v_t| h`` per step, where
               Stewart-Trinkle keeps it on the ground); sticking, rolling and the sliding
               deceleration are Coulomb's. Step outputs keep the Stewart-Trinkle layout
-              (gamma, beta, omega) with omega = 0.
+              (gamma, beta, omega) with omega = 0; there ``beta_j = alpha b_j`` are the
+              generators' tangential parts, so ``sum_j beta_j = alpha gamma`` always (a sticking
+              contact carries cancelling pairs): only the net ``sum_j beta_j t_j`` (the step's
+              ``friction_impulse``) is physical, not the sum of the betas.
     """
 
     coefficients: np.ndarray
@@ -369,8 +373,9 @@ def assemble_lcp(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The LCP ``(F (B, d, d), z (B, d))`` of one step, and the row scale S (nc + nt,).
 
-    The cone's regularization applies to the tangent rows, or with ``regularize_normal`` (the
-    Anitescu generator rows) to the normal rows."""
+    The cone's regularization applies to the tangent rows (relative to their mean diagonal), or
+    with ``regularize_normal`` (the Anitescu generator rows) to every normal row, relative to
+    its own diagonal."""
     fr = cone.frictional
     F, z, S = _assemble(
         np.asarray(quant.W, dtype=float),
@@ -429,7 +434,10 @@ def _assemble(W, v_free, phi, Jn, Jt, fr, coeff, k, reg, h, reg_from):
                 F[b, row, r + f] = 1.0
                 F[b, r + f, row] = -1.0
             F[b, r + f, fr[f]] = coeff[f]
-        if reg > 0.0 and r > reg_from:  # rows reg_from..r (the tangent rows, or all)
+        if reg > 0.0 and reg_from == 0:  # generator rows: each relative to its own diagonal
+            for i in range(r):  # (local: a pruned contact changes no other row)
+                F[b, i, i] += reg * F[b, i, i]
+        elif reg > 0.0 and r > reg_from:  # the tangent rows, relative to their mean diagonal
             mean = 0.0
             for i in range(reg_from, r):
                 mean += F[b, i, i]

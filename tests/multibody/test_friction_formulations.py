@@ -124,3 +124,22 @@ def test_anitescu_steps_converge_under_smoothing_where_stewart_trinkle_need_not(
         assert r.converged.all()
         x = r.x_next
     assert model.contact_model.distances(x[:, : model.contact_model.nq]).min() > -1e-3
+
+
+def test_pruning_leaves_an_exact_anitescu_step_unchanged():
+    """Far candidates left out of the LCP change nothing under exact contact: the generator
+    rows' regularization is local to each row (a mean over the rows in play would move the
+    others' by ~1e-10 when a far contact is pruned)."""
+    model = build_scene_model(replace(Scene.load("box_push"), friction_model="anitescu"))
+    rng = np.random.default_rng(5)
+    x = np.tile(model.x0, (6, 1))
+    x[:, 2] = rng.uniform(-0.2, 0.2, 6)  # tilted: one bottom corner down, the top ones far
+    x[:, 1] = 0.1 + 0.2 * np.abs(np.sin(x[:, 2])) + rng.uniform(0.0, 0.003, 6)
+    x[:, 3:] = rng.normal(0.0, 0.5, (6, 3))
+    u = rng.uniform(-5.0, 5.0, (6, 1))
+    pruned = model.stepper().step(x, u)
+    full = model.stepper(activation_distance=float("inf")).step(x, u)
+    assert not pruned.active.all() and pruned.impulse.max() > 1e-3  # pruned, and in contact
+    assert pruned.converged.all() and full.converged.all()
+    np.testing.assert_allclose(pruned.x_next, full.x_next, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(pruned.dx_dx, full.dx_dx, rtol=0, atol=1e-9)
