@@ -42,6 +42,9 @@ class Step:
         friction_impulse: (B, nc, 3) tangential impulse in the world frame (N s), for a
             rigid-body scene (None otherwise).
         active: (B, nc) which candidates were in the step's LCP (None where all always are).
+        limit_impulse: (B, nl) the impulses of a rigid-body scene's joint-limit rows (N m s or
+            N s; 0 where a row was left out), in the order of the stepper's ``limits.names``
+            (None for other steppers).
         lcp: the solver's full result, where one LCP was solved for the whole batch.
     """
 
@@ -61,6 +64,7 @@ class Step:
     theta_names: tuple[str, ...] = ()
     friction_impulse: np.ndarray | None = None
     active: np.ndarray | None = None
+    limit_impulse: np.ndarray | None = None
     lcp: object | None = None
 
     def first(self) -> Step:

@@ -11,15 +11,23 @@ applies every setting the scene names.
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import FORMULATIONS, ParameterDerivatives, contact_step
+from drake_abs.contact.contact_lcp import (
+    FORMULATIONS,
+    FrictionCone,
+    ParameterDerivatives,
+    contact_step,
+)
+from drake_abs.contact.damping import implicit_damping
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.multibody.drake_dynamics import ContactModelBase
 from drake_abs.multibody.floating import normalize_quaternions
+from drake_abs.multibody.joint_limits import JointLimitRows, effort_limits, joint_damping
 
 #: how deep (m) a candidate left out of a step's LCP may end below the ground before the step
 #: is solved again with it (see ``ComplementarityStepper._repair``)
@@ -45,6 +53,13 @@ class ComplementarityStepper:
             ``"anitescu"`` (monotone; converges under every smoothing, but a sliding contact
             lifts off at ``alpha |v_t|``): see
             :class:`~drake_abs.contact.contact_lcp.FrictionCone`.
+        joint_limits: honour the plant's joint position limits (unilateral rows in the same
+            LCP as the contacts, smoothed by the same policy, pruned by the same activation
+            distance in rad or m) and its actuators' effort limits (the input is clipped to
+            them; a clipped input's column of ``dx_du`` is 0). See
+            :mod:`drake_abs.multibody.joint_limits`.
+        damping: apply the plant's joint damping, implicitly (stable at any h; see
+            :mod:`drake_abs.contact.damping`).
         solver_options: passed to the interior-point solver.
     """
 
@@ -55,6 +70,8 @@ class ComplementarityStepper:
         gradient: GradientMode = "total",
         activation_distance: float = float("inf"),
         friction: str = "stewart_trinkle",
+        joint_limits: bool = True,
+        damping: bool = True,
         **solver_options,
     ):
         check_gradient_mode(gradient)
@@ -66,6 +83,10 @@ class ComplementarityStepper:
         self.gradient = gradient
         self.activation_distance = float(activation_distance)
         self.solver_options = solver_options
+        plant = model.plant
+        self.limits = JointLimitRows.of(plant if joint_limits else None)
+        self.effort = effort_limits(plant) if joint_limits else np.full(model.nu, np.inf)
+        self.damping = joint_damping(plant) if damping else np.zeros(model.nv)
 
     @property
     def sizes(self) -> tuple[int, int, int, int]:
@@ -130,8 +151,14 @@ class ComplementarityStepper:
             raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
         if not (np.isfinite(x).all() and np.isfinite(u).all()):
             raise ValueError("x and u must be finite")
+        saturated = np.abs(u) > self.effort  # effort limits: the input applied is clipped
+        if saturated.any():
+            u = np.clip(u, -self.effort, self.effort)
         q, v = x[:, :nq], x[:, nq:]
         pruned = np.isfinite(self.activation_distance)
+        limit_active = np.ones((B, self.limits.size), dtype=bool)
+        if pruned and self.limits.size:
+            limit_active = self.limits.distances(q) <= self.activation_distance
         groups = None  # (rows, active contact indices, quantities or None) per active set
         if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
             idx, quant = self.model.quantities_within(
@@ -144,9 +171,16 @@ class ComplementarityStepper:
             active = self.model.distances(q) <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
             active = np.ones((B, nc), dtype=bool)
+        active = np.concatenate([active, limit_active], axis=1)  # contacts, then limit rows
+        if groups is not None:  # the one state's contacts, then its limit rows
+            both = np.concatenate([groups[0][1], nc + np.flatnonzero(limit_active[0])])
+            groups = [(slice(None), both, groups[0][2])]
         out = self._solve(q, v, u, active, groups, jacobians, parameters)
         if pruned:
             self._repair(q, v, u, active, out, jacobians, parameters)
+        if jacobians and saturated.any():  # a clipped input does not move the step
+            for key in ("dx_du", "dimpulse_du"):
+                out[key] = out[key] * ~saturated[:, None, :]
         # free bodies' quaternions back to unit norm, Jacobians chained (multibody/floating.py)
         normalize_quaternions(out, getattr(self.model, "quaternion_starts", ()))
         finite = np.isfinite(out["x_next"]).all(axis=1)
@@ -163,28 +197,56 @@ class ComplementarityStepper:
                 stacklevel=2,
             )
         names = self.parameter_names if parameters else ()
-        return Step(active=active, theta_names=names, **out)
+        return Step(active=active[:, :nc], theta_names=names, **out)
 
-    def _cone(self, idx: np.ndarray):
-        """The friction cone of the candidates ``idx`` under this stepper's formulation."""
+    def _cone(self, idx: np.ndarray, n_limits: int = 0) -> FrictionCone:
+        """The friction cone of the candidates ``idx`` under this stepper's formulation, with
+        ``n_limits`` frictionless joint-limit rows after them."""
         cone = self.model.cone_for(idx)
-        if cone.formulation == self.friction:
+        if cone.formulation == self.friction and n_limits == 0:
             return cone
         cache = self.__dict__.setdefault("_cones", {})
-        key = np.asarray(idx, dtype=np.int64).tobytes()
+        key = (np.asarray(idx, dtype=np.int64).tobytes(), n_limits)
         if key not in cache:
-            cache[key] = cone.with_formulation(self.friction)
+            coefficients = np.concatenate([cone.coefficients, np.full(n_limits, np.nan)])
+            cache[key] = FrictionCone(
+                coefficients, cone.directions, cone.regularization, self.friction
+            )
         return cache[key]
 
+    def _joint_rows(self, quant, par, q, lidx: np.ndarray, jacobians: bool):
+        """One group's quantities with the joint-limit rows ``lidx`` appended to the contact
+        rows (frictionless; their distances do not depend on the model parameters) and the
+        joint damping applied implicitly."""
+        if lidx.size:
+            P = quant.dphi.shape[-1] if jacobians else None
+            phi, J, dphi, dJ = self.limits.rows(q, lidx, self.sizes[1], P)
+            extra = dict(
+                phi=np.concatenate([quant.phi, phi], axis=1),
+                Jn=np.concatenate([quant.Jn, J], axis=1),
+            )
+            if jacobians:
+                extra.update(
+                    dphi=np.concatenate([quant.dphi, dphi], axis=1),
+                    dJn=np.concatenate([quant.dJn, dJ], axis=1),
+                )
+            quant = replace(quant, **extra)
+            if par is not None:
+                zeros = np.zeros((q.shape[0], lidx.size, par.dphi.shape[-1]))
+                par = replace(par, dphi=np.concatenate([par.dphi, zeros], axis=1))
+        return implicit_damping(quant, self.damping, self.model.h, par)
+
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: bool) -> dict:
-        """The step of states (q, v, u) with the candidates ``active`` (B, nc) in the LCP, one
-        batched LCP per active set (``groups``: precomputed, or None): the output arrays."""
+        """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
+        then joint-limit rows) in the LCP, one batched LCP per active set (``groups``:
+        precomputed, or None): the output arrays."""
         nq, nv, nu, nc = self.sizes
         B = q.shape[0]
         out = {
             "x_next": np.empty((B, nq + nv)),
             "impulse": np.zeros((B, nc)),
             "friction_impulse": np.zeros((B, nc, 3)),
+            "limit_impulse": np.zeros((B, self.limits.size)),
             "mu": np.zeros((B, nc)),
             "converged": np.ones(B, dtype=bool),
             "iterations": np.zeros(B, dtype=np.int64),
@@ -201,13 +263,15 @@ class ComplementarityStepper:
             out.update(dx_dtheta=np.empty((B, nq + nv, T)), dimpulse_dtheta=np.zeros((B, nc, T)))
         if groups is None:
             groups = _groups_by_active_set(active)
-        for rows, idx, quant in groups:
+        for rows, both, quant in groups:
+            idx, lidx = both[both < nc], both[both >= nc] - nc
             if quant is None:
                 quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
-            cone = self._cone(idx)
+            cone = self._cone(idx, lidx.size)
             par = None
             if parameters:
                 par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows])
+            quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians)
             r = contact_step(
                 quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
                 parameters=par, **self.solver_options,
@@ -217,23 +281,27 @@ class ComplementarityStepper:
                     f"the dynamics provider's derivatives have {r.dx_du.shape[-1]} input "
                     f"columns after (q, v); the model has nu = {nu}"
                 )
-            self._scatter(out, rows, idx, cone, r, jacobians)
+            self._scatter(out, rows, idx, lidx, cone, r, jacobians)
         return out
 
     def _repair(self, q, v, u, active, out, jacobians: bool, parameters: bool) -> None:
         """Pruning never lets a step pass through a contact: a candidate left out of the LCP
         (beyond the activation distance) that the step would leave deeper than
         :data:`REPAIR_TOL` below the ground (a fast impact closes more than the activation
-        distance within one step) joins the LCP, and that state's step is solved again. With no
-        such candidate, the pruned answer with zero impulse on the left-out candidates solves
-        the full LCP: pruning does not change an exact step. ``active`` and ``out`` are
-        updated in place."""
+        distance within one step), or a joint-limit row it would leave violated by more than
+        that (rad or m), joins the LCP, and that state's step is solved again. With no such
+        row, the pruned answer with zero impulse on the left-out rows solves the full LCP:
+        pruning does not change an exact step. ``active`` (B, nc + nl) and ``out`` are updated
+        in place."""
         if active.all():  # nothing was left out
             return
         nq = self.sizes[0]
         for repair in range(MAX_REPAIRS + 1):
             # a non-finite state's distances are NaN, which compare False
-            phi = self.model.distances(out["x_next"][:, :nq])
+            q_next = out["x_next"][:, :nq]
+            phi = np.concatenate(
+                [self.model.distances(q_next), self.limits.distances(q_next)], axis=1
+            )
             missed = (phi < -REPAIR_TOL) & ~active
             if not missed.any():
                 return
@@ -241,8 +309,8 @@ class ComplementarityStepper:
             if repair == MAX_REPAIRS:  # out of repairs: flagged, never passed as valid
                 out["converged"][rows] = False
                 warnings.warn(
-                    f"{rows.size} step(s) still pass a left-out contact after {MAX_REPAIRS} "
-                    "repairs; their `converged` flags are False",
+                    f"{rows.size} step(s) still pass a left-out contact or joint limit after "
+                    f"{MAX_REPAIRS} repairs; their `converged` flags are False",
                     StepOverflowWarning,
                     stacklevel=3,
                 )
@@ -252,9 +320,11 @@ class ComplementarityStepper:
             for key, value in sub.items():
                 out[key][rows] = value
 
-    def _scatter(self, out, rows, idx, cone, r, jacobians) -> None:
-        """Write one group's step into the batch outputs (rows: a slice or row indices)."""
+    def _scatter(self, out, rows, idx, lidx, cone, r, jacobians) -> None:
+        """Write one group's step into the batch outputs (rows: a slice or row indices). The
+        group's normal rows are its contacts ``idx``, then its joint-limit rows ``lidx``."""
         nc_g, nt, _ = cone.sizes()
+        k = idx.size  # the group's contact rows; its limit rows follow them
         nq = r.q_next.shape[1]
         out["x_next"][rows, :nq] = r.q_next
         out["x_next"][rows, nq:] = r.v_next
@@ -272,17 +342,18 @@ class ComplementarityStepper:
         fr = idx[cone.frictional]
         beta = r.lam[:, nc_g : nc_g + nt].reshape(r.lam.shape[0], -1, cone.directions)
         blocks = [
-            ("impulse", idx, r.lam[:, :nc_g]),
-            ("mu", idx, r.mu),
+            ("impulse", idx, r.lam[:, :k]),
+            ("limit_impulse", lidx, r.lam[:, k:nc_g]),
+            ("mu", idx, r.mu[:, :k]),
             ("friction_impulse", fr, beta @ self.model.tangents),
         ]
         if jacobians:
             blocks += [
-                ("dimpulse_dx", idx, r.dlam_dx[:, :nc_g]),
-                ("dimpulse_du", idx, r.dlam_du[:, :nc_g]),
+                ("dimpulse_dx", idx, r.dlam_dx[:, :k]),
+                ("dimpulse_du", idx, r.dlam_du[:, :k]),
             ]
         if r.dlam_dtheta is not None:
-            blocks.append(("dimpulse_dtheta", idx, r.dlam_dtheta[:, :nc_g]))
+            blocks.append(("dimpulse_dtheta", idx, r.dlam_dtheta[:, :k]))
         for key, cols, value in blocks:
             if whole:
                 out[key][:, cols] = value
