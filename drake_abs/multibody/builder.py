@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
@@ -31,7 +32,7 @@ from drake_abs.multibody.drake_dynamics import (
     MultibodyContactModel,
     PointContact,
 )
-from drake_abs.multibody.model_files import add_models
+from drake_abs.multibody.model_files import add_models, apply_mjcf, model_report, read_mjcf
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 from drake_abs.multibody.scene import ModelSpec, Scene
 from drake_abs.multibody.stepper import ComplementarityStepper
@@ -60,12 +61,31 @@ def example_robot_data_dir() -> Path:
     )
 
 
+@functools.cache
+def gymnasium_assets_dir() -> Path:
+    """The installed gymnasium's MuJoCo model files (…/gymnasium/envs/mujoco/assets), found
+    without importing gymnasium."""
+    import importlib.util
+
+    found = importlib.util.find_spec("gymnasium")
+    if found is None or found.origin is None:
+        raise FileNotFoundError(
+            "gymnasium is not installed (pip install gymnasium): a model file "
+            "'gymnasium:<file>.xml' names one of its MuJoCo assets"
+        )
+    return Path(found.origin).parent / "envs" / "mujoco" / "assets"
+
+
 def resolve_model_file(spec: ModelSpec) -> Path:
-    """The file a ModelSpec names: ``drake_abs:``, ``example-robot-data:`` or a path."""
+    """The file a ModelSpec names: ``drake_abs:<path>`` (shipped with this package),
+    ``example-robot-data:<path>`` (under its ``robots/``), ``gymnasium:<file>`` (one of
+    gymnasium's MuJoCo assets, e.g. ``gymnasium:hopper.xml``) or a path."""
     if spec.file.startswith("drake_abs:"):
         path = PACKAGE_DIR / spec.file.split(":", 1)[1]
     elif spec.file.startswith("example-robot-data:"):
         path = example_robot_data_dir() / "robots" / spec.file.split(":", 1)[1]
+    elif spec.file.startswith("gymnasium:"):
+        path = gymnasium_assets_dir() / spec.file.split(":", 1)[1]
     else:
         path = Path(spec.file)
     if not path.is_file():
@@ -88,6 +108,12 @@ class SceneModel:
     def x0(self) -> np.ndarray:
         """The scene's initial state x = (q0, v0), shape (nq + nv,)."""
         return np.concatenate([self.q0, self.v0])
+
+    def model_report(self) -> dict:
+        """What the plant holds of the scene's model files: per joint its coordinates, limits,
+        damping and armature, per actuator its gear and effort limit (see
+        :func:`drake_abs.multibody.model_files.model_report`)."""
+        return model_report(self.plant)
 
     def stepper(
         self,
@@ -121,14 +147,33 @@ class SceneModel:
         )
 
 
-def _parse(parser: Parser, path: Path, collisions: bool):
+def _parse(parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where: str):
     """Parse one model file: its model instances, with the bodies its URDF ``floating`` joints
-    name given a quaternion floating joint of that name (see :func:`add_floating_base_chains`)."""
-    instances, floating = add_models(parser, path, collisions=collisions)
+    name given a quaternion floating joint of that name, at the joint's origin (see
+    :func:`add_floating_base_chains`); an MJCF file (``.xml``) checked and completed by
+    :func:`~drake_abs.multibody.model_files.read_mjcf` and
+    :func:`~drake_abs.multibody.model_files.apply_mjcf` (``spec.ignore``, ``spec.keyframe``)."""
+    mjcf = None
+    if path.suffix.lower() == ".xml":
+        try:
+            mjcf = read_mjcf(path, spec.ignore)
+        except ValueError as err:
+            raise ValueError(f"{where} ({spec.file}): {err}") from err
+    elif spec.ignore or spec.keyframe is not None:
+        raise ValueError(
+            f"{where}: ignore and keyframe apply to MuJoCo files (.xml) only; {spec.file!r} is "
+            "not one"
+        )
+    instances, floating = add_models(parser, path, collisions=collisions, mjcf=mjcf)
     plant = parser.plant()
-    for joint, link in floating:
-        body = plant.GetBodyByName(link, instances[0])
-        plant.AddJoint(QuaternionFloatingJoint(joint, plant.world_frame(), body.body_frame()))
+    if mjcf is not None:
+        apply_mjcf(plant, instances[0], mjcf, spec.keyframe, where=f"{where} ({spec.file})")
+    for joint in floating:
+        body = plant.GetBodyByName(joint.link, instances[0])
+        added = plant.AddJoint(
+            QuaternionFloatingJoint(joint.name, plant.world_frame(), body.body_frame())
+        )
+        added.SetDefaultPose(RigidTransform(RollPitchYaw(joint.rpy), joint.xyz))
     return instances
 
 
@@ -147,8 +192,9 @@ def add_scene_models(
         for package in robots.iterdir():  # URDFs refer to package://<robot>_description/...
             if package.is_dir() and not parser.package_map().Contains(package.name):
                 parser.package_map().Add(package.name, str(package))
-    for spec in scene.models:
-        instances = _parse(parser, resolve_model_file(spec), collisions)
+    for i, spec in enumerate(scene.models):
+        where = f"scene {scene.name!r}: models[{i}]"
+        instances = _parse(parser, resolve_model_file(spec), collisions, spec, where)
         instance = instances[0]
         if spec.name:
             plant.RenameModelInstance(instance, spec.name)
@@ -180,7 +226,9 @@ def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
     angular-velocity map; like any roll-pitch-yaw parametrisation it is singular at
     pitch = +-pi/2. Bodies that already have a joint from the world (such as the quaternion
     floating joint a URDF ``floating`` joint asks for: see :func:`add_scene_models`) keep it.
-    Returns the names of the bodies given a floating base."""
+    Each chain's default positions place the body at its default pose from the model file (an
+    SDF link's ``<pose>``, an MJCF body's ``pos``/``quat``): x, y, z and the yaw, pitch and roll
+    of its orientation. Returns the names of the bodies given a floating base."""
     inboard = {int(plant.get_joint(i).child_body().index()) for i in plant.GetJointIndices()}
     roots = []
     for k in range(plant.num_model_instances()):
@@ -190,6 +238,9 @@ def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
             if int(i) != int(plant.world_body().index()) and int(i) not in inboard:
                 roots.append(body)
     for body in roots:
+        pose = plant.GetDefaultFloatingBaseBodyPose(body)
+        rpy = RollPitchYaw(pose.rotation())
+        default = (*pose.translation(), rpy.yaw_angle(), rpy.pitch_angle(), rpy.roll_angle())
         parent = plant.world_body()
         instance = body.model_instance()
         for j, (name, kind, axis) in enumerate(FLOATING_BASE_JOINTS):
@@ -199,11 +250,28 @@ def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
                 if last
                 else plant.AddRigidBody(f"{body.name()}_{name}", instance, SpatialInertia.Zero())
             )
-            plant.AddJoint(
+            joint = plant.AddJoint(
                 kind(f"{body.name()}_{name}", parent.body_frame(), child.body_frame(), axis)
             )
+            joint.set_default_positions([float(default[j])])
             parent = child
     return [b.name() for b in roots]
+
+
+def _check_armature(model: PinocchioContactModel, plant: MultibodyPlant) -> None:
+    """``NotImplementedError`` unless the pinocchio model has the plant's reflected inertias
+    (actuator armature, which Drake's mass matrix includes) as its armature."""
+    reflected = np.zeros(plant.num_velocities())
+    for i in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(i)
+        reflected[actuator.joint().velocity_start()] += actuator.default_reflected_inertia()
+    armature = np.asarray(getattr(model.pin_model, "armature", np.zeros_like(reflected)))
+    if not np.allclose(armature, reflected, rtol=1e-12, atol=0.0):
+        raise NotImplementedError(
+            "the plant's actuators have reflected inertia (armature) "
+            f"{reflected.tolist()} that the pinocchio dynamics do not include (they have "
+            f"{armature.tolist()}); use dynamics: drake"
+        )
 
 
 def make_stepper(scene: Scene | str | Path, **overrides) -> ComplementarityStepper:
@@ -233,6 +301,7 @@ def build_scene_model(scene: Scene | str | Path) -> SceneModel:
     else:
         try:
             model = PinocchioContactModel(*args)
+            _check_armature(model, plant)
         except NotImplementedError:
             if scene.dynamics == "pinocchio":
                 raise

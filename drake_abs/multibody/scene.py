@@ -18,8 +18,10 @@ Example (YAML)::
     initial_state: {q: [0, 0.1, 0], v: [1.0, 0, 0]}
 
 Model files: ``drake_abs:<path>`` is a file shipped with this package (``models/``),
-``example-robot-data:<path>`` one of the installed example-robot-data robots, anything else a
-path on disk.
+``example-robot-data:<path>`` one of the installed example-robot-data robots,
+``gymnasium:<file>`` one of gymnasium's MuJoCo model files (``gymnasium:hopper.xml``), anything
+else a path on disk. URDF, SDF and MJCF files are used as published (see README, "Model files as
+published").
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from drake_abs.contact.smoothing import (
     SmoothingPolicy,
     TimeStepScaled,
 )
+from drake_abs.multibody.model_files import IGNORABLE
 
 _SMOOTHING = {
     "exact": Exact,
@@ -127,12 +130,23 @@ class ModelSpec:
     """One model file. ``weld``: a frame of the model welded to the world at the origin (a fixed
     base); otherwise its root body floats: q = (x, y, z, yaw, pitch, roll), v their rates (a
     chain of joints: ``drake_abs.multibody.builder.add_floating_base_chains``).
-    ``actuate``: joints to give an actuator (for URDFs without ``<transmission>`` tags)."""
+    ``actuate``: joints to give an actuator (for URDFs without ``<transmission>`` tags).
+    The root body's pose in the file (an SDF ``<pose>``, an MJCF body's ``pos``/``quat``, a URDF
+    ``floating`` joint's ``<origin>``) is its default pose: the scene's initial q when
+    ``initial_state`` gives none.
+
+    MuJoCo files (``.xml``) only: ``keyframe``, the name of a ``<keyframe>`` ``<key>`` whose
+    qpos gives the default joint positions (unnamed keys by index, ``"0"``); ``ignore``, the
+    file's attributes the step does not model that may be dropped, from
+    :data:`drake_abs.multibody.model_files.IGNORABLE` (``joint.stiffness``,
+    ``joint.frictionloss``, ``joint.armature``): a file that has them is refused otherwise."""
 
     file: str
     name: str | None = None
     weld: str | None = None
     actuate: tuple[str, ...] = ()
+    keyframe: str | None = None
+    ignore: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -296,7 +310,16 @@ class Scene:
                 raise ValueError(
                     f"{where}: {key}.actuate must be a list of joint names; got {m.actuate!r}"
                 )
-            models.append(replace(m, actuate=tuple(m.actuate)))
+            _text(m.keyframe, where, f"{key}.keyframe", "a keyframe key's name", optional=True)
+            if not (
+                isinstance(m.ignore, list | tuple)
+                and all(isinstance(a, str) and a in IGNORABLE for a in m.ignore)
+            ):
+                raise ValueError(
+                    f"{where}: {key}.ignore must be a list of some of {list(IGNORABLE)} "
+                    f"(attributes to drop); got {m.ignore!r}"
+                )
+            models.append(replace(m, actuate=tuple(m.actuate), ignore=tuple(m.ignore)))
         put("models", tuple(models))
         if not isinstance(self.contacts, list | tuple):
             raise ValueError(

@@ -21,7 +21,9 @@ from drake_abs import ContactAware, Exact
 from drake_abs.multibody import ModelSpec, Scene, build_scene_model
 from drake_abs.multibody.drake_dynamics import MultibodyContactModel
 from drake_abs.multibody.floating import normalize_quaternions
+from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 
+PROVIDERS = {"pinocchio": PinocchioContactModel, "drake": MultibodyContactModel}
 #: J: rounding of one step's energy (about 1 J here) is ~1e-16; a real gain is far larger
 ENERGY_TOL = 1e-12
 
@@ -154,13 +156,15 @@ def _tangent_basis(quat: np.ndarray) -> np.ndarray:
     return np.linalg.svd(np.eye(4) - np.outer(quat, quat))[0][:, :3]
 
 
+@pytest.mark.parametrize("dynamics", ["pinocchio", "drake"])
 @pytest.mark.parametrize("smoothing", [Exact(), ContactAware(1e-3, 0.02)], ids=["exact", "abs"])
-def test_step_jacobians_match_central_differences_along_the_unit_sphere(smoothing):
+def test_step_jacobians_match_central_differences_along_the_unit_sphere(smoothing, dynamics):
     """dx+/dx, dx+/dtheta with the projection: against central differences of the step along
     the quaternion's tangent directions (states on the unit sphere), the position and the
     velocity; the quaternion's rows are tangent to the sphere at q+, and a radial change of q
-    changes nothing (the step depends on the orientation only)."""
-    model = build_scene_model("ball_throw")
+    changes nothing (the step depends on the orientation only). With either provider."""
+    model = build_scene_model(replace(Scene.load("ball_throw"), dynamics=dynamics))
+    assert isinstance(model.contact_model, PROVIDERS[dynamics])
     stepper = model.stepper(smoothing=smoothing)
     x = _contact_state(model)
     r = stepper.step(x[None], np.zeros((1, 0)), parameters=True)
@@ -239,8 +243,8 @@ def test_normalize_quaternions_chains_the_jacobians(rng):
 
 def test_two_free_balls_each_keep_a_unit_quaternion():
     """Any number of free bodies: two balls (two model instances of the URDF), one landing and
-    one in the air, both spinning; each quaternion block is found and kept unit, and the
-    provider is the Drake one (pinocchio covers no quaternion joint)."""
+    one in the air, both spinning; each quaternion block is found and kept unit (the provider:
+    pinocchio, which evaluates quaternion floating joints in Drake's coordinates)."""
     scene = replace(
         Scene.load("ball_throw"),
         models=(
@@ -253,7 +257,7 @@ def test_two_free_balls_each_keep_a_unit_quaternion():
     )
     model = build_scene_model(scene)
     cm = model.contact_model
-    assert isinstance(cm, MultibodyContactModel)
+    assert isinstance(cm, PinocchioContactModel)
     assert cm.nq == 14 and cm.nv == 12 and cm.quaternion_starts == (0, 7)
     np.testing.assert_array_equal(model.q0[[0, 7]], 1.0)  # the default: upright, at the origin
     x = np.concatenate([model.q0, np.zeros(12)])

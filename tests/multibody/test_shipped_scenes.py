@@ -36,6 +36,10 @@ SIZES = {
     "hopper": (5, 5, 2, 1),
     "half_cheetah": (9, 9, 6, 4),
     "solo12_drop": (18, 18, 12, 4),
+    # gymnasium's MuJoCo files as published (their rollouts: tests/multibody/test_model_files.py)
+    "gym_hopper": (6, 6, 3, 5),
+    "gym_half_cheetah": (9, 9, 6, 7),
+    "ur5_fall": (6, 6, 6, 4),  # example-robot-data's UR5 as published
 }
 
 
@@ -108,7 +112,7 @@ def rollout(name):
     return np.array(xs), np.array(impulses), np.array(iterations)
 
 
-@pytest.mark.parametrize("name", SIZES)
+@pytest.mark.parametrize("name", STEPS)
 def test_rollout_converges_and_nothing_falls_through_the_ground(name):
     sm = scene_model(name)
     xs, impulses, iterations = rollout(name)
