@@ -87,6 +87,8 @@ class ComplementarityStepper:
         self.limits = JointLimitRows.of(plant if joint_limits else None)
         self.effort = effort_limits(plant) if joint_limits else np.full(model.nu, np.inf)
         self.damping = joint_damping(plant) if damping else np.zeros(model.nv)
+        self._clips = bool(np.isfinite(self.effort).any())  # per-step work only where needed
+        self._damps = bool(self.damping.any())
 
     @property
     def sizes(self) -> tuple[int, int, int, int]:
@@ -151,14 +153,19 @@ class ComplementarityStepper:
             raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
         if not (np.isfinite(x).all() and np.isfinite(u).all()):
             raise ValueError("x and u must be finite")
-        saturated = np.abs(u) > self.effort  # effort limits: the input applied is clipped
-        if saturated.any():
-            u = np.clip(u, -self.effort, self.effort)
+        saturated = None
+        if self._clips:  # effort limits: the input applied is clipped
+            saturated = np.abs(u) > self.effort
+            if saturated.any():
+                u = np.clip(u, -self.effort, self.effort)
+            else:
+                saturated = None
         q, v = x[:, :nq], x[:, nq:]
         pruned = np.isfinite(self.activation_distance)
-        limit_active = np.ones((B, self.limits.size), dtype=bool)
-        if pruned and self.limits.size:
-            limit_active = self.limits.distances(q) <= self.activation_distance
+        if self.limits.size:
+            limit_active = np.ones((B, self.limits.size), dtype=bool)
+            if pruned:
+                limit_active = self.limits.distances(q) <= self.activation_distance
         groups = None  # (rows, active contact indices, quantities or None) per active set
         if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
             idx, quant = self.model.quantities_within(
@@ -171,18 +178,21 @@ class ComplementarityStepper:
             active = self.model.distances(q) <= self.activation_distance
         else:  # nothing to prune: skip the distance evaluation
             active = np.ones((B, nc), dtype=bool)
-        active = np.concatenate([active, limit_active], axis=1)  # contacts, then limit rows
-        if groups is not None:  # the one state's contacts, then its limit rows
+        if self.limits.size:  # contacts, then limit rows
+            active = np.concatenate([active, limit_active], axis=1)
+        if groups is not None and self.limits.size:  # the one state's contacts, then limits
             both = np.concatenate([groups[0][1], nc + np.flatnonzero(limit_active[0])])
             groups = [(slice(None), both, groups[0][2])]
         out = self._solve(q, v, u, active, groups, jacobians, parameters)
         if pruned:
             self._repair(q, v, u, active, out, jacobians, parameters)
-        if jacobians and saturated.any():  # a clipped input does not move the step
+        if jacobians and saturated is not None:  # a clipped input does not move the step
             for key in ("dx_du", "dimpulse_du"):
                 out[key] = out[key] * ~saturated[:, None, :]
         # free bodies' quaternions back to unit norm, Jacobians chained (multibody/floating.py)
-        normalize_quaternions(out, getattr(self.model, "quaternion_starts", ()))
+        starts = getattr(self.model, "quaternion_starts", ())
+        if len(starts):
+            normalize_quaternions(out, starts)
         finite = np.isfinite(out["x_next"]).all(axis=1)
         for key in ("dx_dx", "dx_du", "dx_dtheta") if jacobians else ():
             if key in out:
@@ -234,6 +244,8 @@ class ComplementarityStepper:
             if par is not None:
                 zeros = np.zeros((q.shape[0], lidx.size, par.dphi.shape[-1]))
                 par = replace(par, dphi=np.concatenate([par.dphi, zeros], axis=1))
+        if not self._damps:
+            return quant, par
         return implicit_damping(quant, self.damping, self.model.h, par)
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: bool) -> dict:
@@ -264,7 +276,9 @@ class ComplementarityStepper:
         if groups is None:
             groups = _groups_by_active_set(active)
         for rows, both, quant in groups:
-            idx, lidx = both[both < nc], both[both >= nc] - nc
+            idx, lidx = (
+                (both[both < nc], both[both >= nc] - nc) if self.limits.size else (both, both[:0])
+            )
             if quant is None:
                 quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
             cone = self._cone(idx, lidx.size)
@@ -299,9 +313,9 @@ class ComplementarityStepper:
         for repair in range(MAX_REPAIRS + 1):
             # a non-finite state's distances are NaN, which compare False
             q_next = out["x_next"][:, :nq]
-            phi = np.concatenate(
-                [self.model.distances(q_next), self.limits.distances(q_next)], axis=1
-            )
+            phi = self.model.distances(q_next)
+            if self.limits.size:
+                phi = np.concatenate([phi, self.limits.distances(q_next)], axis=1)
             missed = (phi < -REPAIR_TOL) & ~active
             if not missed.any():
                 return
