@@ -26,6 +26,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "ball-throw": "ball_throw",
     "smoothing-vs-rs": "smoothing_vs_rs",
     "speed-accuracy": "speed_accuracy",
+    "mujoco-comparison": "mujoco_comparison",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 

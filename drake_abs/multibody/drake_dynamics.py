@@ -4,8 +4,9 @@ with their derivatives, for the complementarity step of :mod:`drake_abs.contact.
 Values and derivatives come from one AutoDiffXd evaluation of the plant per state, seeded with
 the identity on p = (q, v, u): M(q), the bias and gravity terms, the actuation, the contact
 points' signed distances and translational Jacobians, and qdot = N(q) v. Geometry is computed
-here (a point, with an optional radius, against a half-space), not by SceneGraph, so only the
-contacts a scene declares exist (and AutoDiffXd distance queries are not needed).
+here (a point, with an optional radius, against a half-space; or a body-body pair of collision
+shapes in closed form, :mod:`drake_abs.multibody.geometry_contacts`), not by SceneGraph, so only
+the contacts a scene declares exist (and AutoDiffXd distance queries are not needed).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
 from drake_abs.multibody.affine_dynamics import AffineDynamics
 from drake_abs.multibody.floating import quaternion_starts
+from drake_abs.multibody.geometry_contacts import PairContact, pair_geometry, pair_tangents
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,12 @@ def tangent_directions(normal: np.ndarray, k: int) -> np.ndarray:
     return np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
 
 
+def _pose(plant, ctx, body):
+    """(R_WB (3, 3), p_WB (3,)) of ``body``, in the plant's scalar type."""
+    X = plant.EvalBodyPoseInWorld(ctx, body)
+    return X.rotation().matrix(), X.translation()
+
+
 def _split(arr: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
     """Value (shape of arr) and gradient (shape + (P,)) of an AutoDiffXd array."""
     flat = np.asarray(arr, dtype=object).ravel()
@@ -72,7 +80,9 @@ class ContactModelBase(ABC):
 
     Args:
         plant: a finalized MultibodyPlant (time_step 0: the step is ours), double.
-        contacts: the contact candidates.
+        contacts: the contact candidates: points against the ground (:class:`PointContact`), or
+            body-body pairs (:class:`~drake_abs.multibody.geometry_contacts.PairContact`, which
+            only :class:`MultibodyContactModel` evaluates).
         ground: the plane contacts act against.
         time_step: h in s.
         directions: tangent directions per frictional contact (linearised cone).
@@ -81,7 +91,7 @@ class ContactModelBase(ABC):
     def __init__(
         self,
         plant: MultibodyPlant,
-        contacts: list[PointContact],
+        contacts: list[PointContact | PairContact],
         ground: GroundPlane,
         time_step: float,
         directions: int = 4,
@@ -89,7 +99,7 @@ class ContactModelBase(ABC):
         if not plant.is_finalized():
             raise ValueError("plant must be finalized")
         if not contacts:
-            raise ValueError("contacts must list at least one PointContact")
+            raise ValueError("contacts must list at least one PointContact or PairContact")
         self.plant = plant
         self.contacts = list(contacts)
         self.ground = ground
@@ -108,20 +118,28 @@ class ContactModelBase(ABC):
         #: where each free body's unit quaternion (qw, qx, qy, qz) starts in q: the stepper
         #: keeps these at unit norm (see :mod:`drake_abs.multibody.floating`)
         self.quaternion_starts = quaternion_starts(plant)
-        self._bodies_d = []
-        for c in contacts:
-            instance = plant.GetModelInstanceByName(c.model_instance) if c.model_instance else None
-            body = (
-                plant.GetBodyByName(c.body, instance)
-                if instance is not None
-                else plant.GetBodyByName(c.body)
-            )
-            self._bodies_d.append(body)
+
+        def body_of(name, model):
+            instance = plant.GetModelInstanceByName(model) if model else None
+            return plant.GetBodyByName(name, instance) if instance else plant.GetBodyByName(name)
+
+        self._bodies_d = []  # per candidate: its body (a pair: body A)
+        self._pair_bodies_d = {}  # per pair candidate's index: (body A, body B)
+        for i, c in enumerate(contacts):
+            if isinstance(c, PairContact):
+                self._pair_bodies_d[i] = (
+                    body_of(c.body_a, c.model_a),
+                    body_of(c.body_b, c.model_b),
+                )
+                self._bodies_d.append(self._pair_bodies_d[i][0])
+            else:
+                self._bodies_d.append(body_of(c.body, c.model_instance))
         self.affine = None  # set below, once the provider can evaluate its quantities
         self._setup()
         #: the affine quantities of a plant with prismatic joints only (None otherwise, or when
-        #: set to None by hand to force the general path): see multibody/affine_dynamics.py
-        self.affine = AffineDynamics.of(self)
+        #: set to None by hand to force the general path): see multibody/affine_dynamics.py.
+        #: A pair's distance is not affine in q (its normal turns), so pairs rule it out.
+        self.affine = None if self._pair_bodies_d else AffineDynamics.of(self)
 
     @abstractmethod
     def _setup(self) -> None:
@@ -259,6 +277,10 @@ class MultibodyContactModel(ContactModelBase):
         self.plant_ad = plant.ToAutoDiffXd()
         self.context_ad = self.plant_ad.CreateDefaultContext()
         self._bodies = [self.plant_ad.get_body(b.index()) for b in self._bodies_d]
+        self._pair_bodies_ad = {
+            i: tuple(self.plant_ad.get_body(b.index()) for b in pair)
+            for i, pair in self._pair_bodies_d.items()
+        }
         self._context = plant.CreateDefaultContext()
         self._qdot_is_v = bool(plant.IsVelocityEqualToQDot())
         self._unit_v_d = list(np.eye(self.nv))
@@ -272,6 +294,12 @@ class MultibodyContactModel(ContactModelBase):
         for b, qb in enumerate(q):
             plant.SetPositions(ctx, qb)
             for i, (contact, body) in enumerate(zip(self.contacts, self._bodies_d, strict=True)):
+                if i in self._pair_bodies_d:
+                    A, B = self._pair_bodies_d[i]
+                    out[b, i] = pair_geometry(
+                        contact, *_pose(plant, ctx, A), *_pose(plant, ctx, B)
+                    )[0]
+                    continue
                 p_WC = plant.EvalBodyPoseInWorld(ctx, body).multiply(np.asarray(contact.p_BC))
                 out[b, i] = self.normal @ p_WC - contact.radius - self.ground.height
         return out
@@ -294,6 +322,9 @@ class MultibodyContactModel(ContactModelBase):
         world = plant.world_frame()
         for i in active:
             contact = self.contacts[i]
+            if i in self._pair_bodies_d:
+                self._pair_rows(plant, ctx, i, phi, Jn, Jt)
+                continue
             body = self._bodies[i] if plant is self.plant_ad else self._bodies_d[i]
             X_WB = plant.EvalBodyPoseInWorld(ctx, body)
             p_WC = X_WB.multiply(np.asarray(contact.p_BC, float))
@@ -313,6 +344,28 @@ class MultibodyContactModel(ContactModelBase):
         out["Jn"] = np.array(Jn, dtype=kind).reshape(len(active), nv)
         out["Jt"] = np.array(Jt, dtype=kind).reshape(len(Jt), nv)
         return out
+
+    def _pair_rows(self, plant, ctx, i, phi, Jn, Jt) -> None:
+        """Append pair candidate i's phi, Jn row and (if frictional) k Jt rows: the rows map v to
+        the relative velocity of the witness points, n . (v_A(p_A) - v_B(p_B)), and likewise
+        along k tangents orthogonal to n."""
+        contact = self.contacts[i]
+        A, B = self._pair_bodies_d[i]
+        if plant is self.plant_ad:
+            A, B = self._pair_bodies_ad[i]
+        d, n, p_A, p_B = pair_geometry(contact, *_pose(plant, ctx, A), *_pose(plant, ctx, B))
+        world = plant.world_frame()
+        J = []
+        for body, p_W in ((A, p_A), (B, p_B)):
+            p_BQ = plant.EvalBodyPoseInWorld(ctx, body).inverse().multiply(p_W)
+            J.append(plant.CalcJacobianTranslationalVelocity(
+                ctx, JacobianWrtVariable.kV, body.body_frame(), p_BQ, world, world
+            ))  # fmt: skip
+        J_rel = J[0] - J[1]
+        phi.append(d)
+        Jn.append(n @ J_rel)
+        if contact.friction is not None:
+            Jt.extend(pair_tangents(n, self.cone.directions) @ J_rel)
 
     def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         nq, nv, nu = self.nq, self.nv, self.nu

@@ -41,7 +41,7 @@ from pydrake.multibody.tree import (
     WeldJoint,
 )
 
-from drake_abs.multibody.drake_dynamics import ContactModelBase
+from drake_abs.multibody.drake_dynamics import ContactModelBase, PointContact
 from drake_abs.multibody.pinocchio_free_joints import FreeJointCoordinates
 
 
@@ -141,6 +141,13 @@ def pinocchio_model_from_plant(plant: MultibodyPlant) -> tuple[pin.Model, dict]:
                     f"joint {joint.name()!r}: pinocchio coordinates ({pj.idx_q}, {pj.idx_v}) "
                     f"differ from Drake's ({joint.position_start()}, {joint.velocity_start()})"
                 )
+    # the actuators' reflected inertia (MJCF armature: rotor inertia x gear^2), which Drake's
+    # mass matrix includes, as pinocchio's joint armature (its CRBA and ABA include it)
+    armature = np.zeros(model.nv)
+    for a in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(a)
+        armature[actuator.joint().velocity_start()] += actuator.default_reflected_inertia()
+    model.armature = armature
     return model, carried
 
 
@@ -151,6 +158,13 @@ class PinocchioContactModel(ContactModelBase):
     """
 
     def _setup(self) -> None:
+        pairs = [c for c in self.contacts if not isinstance(c, PointContact)]
+        if pairs:
+            raise NotImplementedError(
+                f"pinocchio evaluates point contacts against the ground only; {len(pairs)} "
+                "candidates are body-body pairs (e.g. "
+                f"{pairs[0].body_a!r}-{pairs[0].body_b!r}); use dynamics: drake"
+            )
         plant = self.plant
         self._eye = np.eye(self.nq)
         self._lower = np.tril_indices(self.nv, -1)

@@ -13,6 +13,8 @@ Example (YAML)::
         points: [[-0.2, 0, -0.1], [0.2, 0, -0.1]]
         friction: 0.5
     friction_directions: 2          # planar scene: +-x only
+    # or from collision geometry:  contacts: [{body: box, geometry: collision, friction: 0.5}]
+    # and body-body pairs:         pairs: [{a: pusher, b: box, friction: 0.3}]
     activation_distance: 0.1        # m; farther contacts are left out of the step's LCP
     smoothing: {kind: contact_aware, mu_max: 1.0e-3, length: 0.02}
     initial_state: {q: [0, 0.1, 0], v: [1.0, 0, 0]}
@@ -149,17 +151,41 @@ class ModelSpec:
     ignore: tuple[str, ...] = ()
 
 
+#: Where ``ContactSpec.geometry`` may take a body's contact candidates from.
+GEOMETRY_SOURCES = ("collision",)
+
+
 @dataclass(frozen=True)
 class ContactSpec:
-    """Contact candidates on one body: ``points`` (m, body frame), each a sphere of ``radius``
-    (m; 0 for a point) against the ground; ``friction`` the Coulomb coefficient, or None for
-    frictionless contact."""
+    """Contact candidates on one body against the ground: ``points`` (m, body frame), each a
+    sphere of ``radius`` (m; 0 for a point), or ``geometry: collision``: the body's collision
+    shapes in its model file, as exact point candidates (spheres: their centre and radius;
+    capsules: their two end-cap centres and radius; boxes: their 8 vertices; see
+    :mod:`drake_abs.multibody.geometry_contacts`). ``friction`` the Coulomb coefficient, or None
+    for frictionless contact."""
 
     body: str
-    points: tuple[tuple[float, float, float], ...]
+    points: tuple[tuple[float, float, float], ...] = ()
     radius: float = 0.0
     friction: float | None = None
     model: str | None = None
+    geometry: str | None = None
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    """Body-body contact candidates: every pair of collision shapes of bodies ``a`` and ``b``
+    (from their model files) that the model's collision filters leave in, evaluated in closed
+    form (sphere-sphere, sphere-box, sphere-capsule; see
+    :mod:`drake_abs.multibody.geometry_contacts`). ``friction`` the Coulomb coefficient (None:
+    frictionless); ``model_a``, ``model_b`` the bodies' model instances (None: unique names).
+    Only ``dynamics: drake`` (or ``auto``, which then uses Drake) evaluates pairs."""
+
+    a: str
+    b: str
+    friction: float | None = None
+    model_a: str | None = None
+    model_b: str | None = None
 
 
 @dataclass(frozen=True)
@@ -169,7 +195,9 @@ class Scene:
     Attributes:
         name: identifier.
         models: the model files.
-        contacts: the contact candidates (the only contacts the plant has).
+        contacts: the contact candidates against the ground.
+        pairs: the body-body contact candidates (:class:`PairSpec`). The step's plant has
+            exactly the contacts and pairs listed, and no others.
         time_step: h in s.
         friction_directions: k, tangent directions per frictional contact (2 for planar scenes).
         ground_normal, ground_height: the ground half-space ``n . p >= height``.
@@ -199,7 +227,8 @@ class Scene:
 
     name: str
     models: tuple[ModelSpec, ...]
-    contacts: tuple[ContactSpec, ...]
+    contacts: tuple[ContactSpec, ...] = ()
+    pairs: tuple[PairSpec, ...] = ()
     time_step: float = 0.01
     friction_directions: int = 4
     ground_normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
@@ -223,17 +252,36 @@ class Scene:
             )
         if not self.models:
             raise ValueError(f"scene {self.name!r}: models must list at least one model file")
-        if not self.contacts:
-            raise ValueError(f"scene {self.name!r}: contacts must list at least one candidate")
+        if not self.contacts and not self.pairs:
+            raise ValueError(
+                f"scene {self.name!r}: contacts or pairs must list at least one candidate"
+            )
         if not (np.isfinite(self.time_step) and self.time_step > 0):
             raise ValueError(f"scene {self.name!r}: time_step must be > 0; got {self.time_step}")
         if int(self.friction_directions) < 2:
             raise ValueError(f"scene {self.name!r}: friction_directions must be >= 2")
         if not self.activation_distance > 0:
             raise ValueError(f"scene {self.name!r}: activation_distance must be > 0")
+        for c in self.pairs:
+            if c.friction is not None and not (np.isfinite(c.friction) and c.friction >= 0):
+                raise ValueError(f"scene {self.name!r}: pair {c.a!r}-{c.b!r}: friction must be "
+                                 f"a finite number >= 0 or null; got {c.friction!r}")  # fmt: skip
         for c in self.contacts:
-            if not c.points:
-                raise ValueError(f"scene {self.name!r}: contact on {c.body!r} lists no points")
+            if c.geometry is not None:
+                if c.geometry not in GEOMETRY_SOURCES:
+                    raise ValueError(
+                        f"scene {self.name!r}: contact on {c.body!r}: geometry must be one of "
+                        f"{GEOMETRY_SOURCES}; got {c.geometry!r}"
+                    )
+                if c.points or c.radius != 0.0:
+                    raise ValueError(
+                        f"scene {self.name!r}: contact on {c.body!r}: give points (and radius) "
+                        "or geometry, not both"
+                    )
+            elif not c.points:
+                raise ValueError(
+                    f"scene {self.name!r}: contact on {c.body!r} lists no points (or geometry)"
+                )
             for p in c.points:
                 if len(p) != 3 or not np.all(np.isfinite(np.asarray(p, float))):
                     raise ValueError(
@@ -332,6 +380,7 @@ class Scene:
                 raise ValueError(f"{where}: {key} must be a ContactSpec; got {c!r}")
             _text(c.body, where, f"{key}.body", "a body name")
             _text(c.model, where, f"{key}.model", "a model instance name", optional=True)
+            _text(c.geometry, where, f"{key}.geometry", f"one of {GEOMETRY_SOURCES}", optional=True)
             if not isinstance(c.points, list | tuple):
                 raise ValueError(
                     f"{where}: {key}.points must be a list of [x, y, z] points "
@@ -347,6 +396,23 @@ class Scene:
             )
             contacts.append(replace(c, points=points, radius=radius, friction=friction))
         put("contacts", tuple(contacts))
+        if not isinstance(self.pairs, list | tuple):
+            raise ValueError(f"{where}: pairs must be a list of pair entries; got {self.pairs!r}")
+        pairs = []
+        for i, c in enumerate(self.pairs):
+            key = f"pairs[{i}]"
+            if not isinstance(c, PairSpec):
+                raise ValueError(f"{where}: {key} must be a PairSpec; got {c!r}")
+            for name in ("a", "b"):
+                _text(getattr(c, name), where, f"{key}.{name}", "a body name")
+            for name in ("model_a", "model_b"):
+                _text(getattr(c, name), where, f"{key}.{name}", "a model instance name",
+                      optional=True)  # fmt: skip
+            friction = _number(
+                c.friction, where, f"{key}.friction", "Coulomb coefficient", optional=True
+            )
+            pairs.append(replace(c, friction=friction))
+        put("pairs", tuple(pairs))
         smoothing = _mapping(self.smoothing, where, "smoothing", "{kind: ..., parameters...}")
         _text(
             smoothing.get("kind", "exact"), where, "smoothing.kind", f"one of {sorted(_SMOOTHING)}"
@@ -396,7 +462,13 @@ class Scene:
 
     @property
     def num_contacts(self) -> int:
-        return sum(len(c.points) for c in self.contacts)
+        """The number of contact candidates: the listed points, and (read from the model files)
+        those of the ``geometry`` entries and of the pairs."""
+        if not self.pairs and all(c.geometry is None for c in self.contacts):
+            return sum(len(c.points) for c in self.contacts)
+        from drake_abs.multibody.builder import scene_contacts  # reads the model files
+
+        return len(scene_contacts(self))
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -410,7 +482,7 @@ class Scene:
         where = f"scene {data.get('name')!r}"
         if "name" not in data:
             raise ValueError("a scene needs a name")
-        for kind, spec in (("models", ModelSpec), ("contacts", ContactSpec)):
+        for kind, spec in (("models", ModelSpec), ("contacts", ContactSpec), ("pairs", PairSpec)):
             if not isinstance(data.get(kind, ()), list | tuple):
                 raise ValueError(f"{where}: {kind} must be a list of mappings; got {data[kind]!r}")
             for i, entry in enumerate(data.get(kind, ())):
@@ -427,12 +499,17 @@ class Scene:
                 raise ValueError(f"{where}: models[{i}] needs a file")
         for i, c in enumerate(data.get("contacts", ())):
             for key in ("body", "points"):
-                if key not in c:
+                if key not in c and not (key == "points" and "geometry" in c):
                     raise ValueError(f"{where}: contacts[{i}] needs {key}")
+        for i, c in enumerate(data.get("pairs", ())):
+            for key in ("a", "b"):
+                if key not in c:
+                    raise ValueError(f"{where}: pairs[{i}] needs {key}")
         # the values' types are checked (and numbers made floats) by the Scene itself
         models = tuple(ModelSpec(**m) for m in data.pop("models", ()))
         contacts = tuple(ContactSpec(**c) for c in data.pop("contacts", ()))
-        return cls(models=models, contacts=contacts, **data)
+        pairs = tuple(PairSpec(**c) for c in data.pop("pairs", ()))
+        return cls(models=models, contacts=contacts, pairs=pairs, **data)
 
     @classmethod
     def load(cls, name: str | Path) -> Scene:

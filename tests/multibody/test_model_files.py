@@ -211,17 +211,11 @@ def test_armature_is_in_the_dynamics_whichever_provider():
     M = [p.CalcMassMatrix(p.CreateDefaultContext()) for p in plants]
     np.testing.assert_allclose(M[0] - M[1], np.diag([0, 0, 0, 1.0, 1.0, 1.0]), atol=1e-12)
     scene = Scene.load("gym_hopper")
-    for dynamics in ("auto", "pinocchio"):
+    for dynamics in ("auto", "pinocchio"):  # pinocchio carries it as its joint armature
         varied = Scene.from_dict({**scene.to_dict(), "dynamics": dynamics})
-        try:
-            cm = build_scene_model(varied).contact_model
-        except NotImplementedError as err:
-            assert dynamics == "pinocchio" and "reflected inertia (armature)" in str(err)
-            continue
-        if isinstance(cm, MultibodyContactModel):
-            assert dynamics == "auto"
-        else:
-            np.testing.assert_allclose(cm.pin_model.armature, [0, 0, 0, 1, 1, 1])
+        cm = build_scene_model(varied).contact_model
+        assert not isinstance(cm, MultibodyContactModel)
+        np.testing.assert_allclose(cm.pin_model.armature, [0, 0, 0, 1, 1, 1])
 
 
 def test_half_cheetah_without_ignore_is_refused_naming_joint_and_attribute():

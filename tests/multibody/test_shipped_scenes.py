@@ -40,6 +40,8 @@ SIZES = {
     "gym_hopper": (6, 6, 3, 5),
     "gym_half_cheetah": (9, 9, 6, 7),
     "ur5_fall": (6, 6, 6, 4),  # example-robot-data's UR5 as published
+    # a sphere pusher (x, y) and a free box: 8 box vertices and the pusher-box pair
+    "pusher_box": (8, 8, 2, 9),
 }
 
 
