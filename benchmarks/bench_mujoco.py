@@ -8,7 +8,8 @@ and gym_half_cheetah, which load the MJCF files unedited), same time step (the s
 * MuJoCo: ``mj_step`` (Euler: the Hopper file's RK4 is switched off so that the same model can be
   differentiated) and ``mjd_transitionFD`` (centred differences, eps 1e-6; it returns the
   same dx+/dx, dx+/du);
-* Drake SAP on the scene's twin (``make_drake_twin``): a double step (``Simulator.AdvanceTo``)
+* Drake SAP on the scene's twin (``make_drake_twin``): a double step (one
+  ``EvalUniquePeriodicDiscreteUpdate`` of the twin without sampled outputs, from each state)
   and one AutoDiffXd step with derivatives seeded on (x, u), where Drake can.
 
 The states are those of a seeded open-loop rollout (the MuJoCo comparison's torques), so every

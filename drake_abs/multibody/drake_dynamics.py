@@ -149,14 +149,32 @@ class ContactModelBase(ABC):
     def massive_bodies(self) -> tuple[str, ...]:
         """Names of the plant's bodies with a positive mass (the mass parameters of
         :meth:`mass_derivatives`; massless helper bodies, such as a floating base's chain, are
-        left out)."""
+        left out). A body name that occurs in several model instances is qualified as
+        ``"instance::body"``, so that every parameter has its own name."""
+        return tuple(name for name, _ in self._massive)
+
+    @functools.cached_property
+    def _massive(self) -> tuple[tuple[str, BodyIndex], ...]:
+        """``(name, body index)`` of each body with a positive mass (see massive_bodies)."""
         plant, ctx = self.plant, self.plant.CreateDefaultContext()
-        out = []
-        for i in range(plant.num_bodies()):
-            body = plant.get_body(BodyIndex(i))
-            if body.index() != plant.world_body().index() and body.get_mass(ctx) > 0.0:
-                out.append(body.name())
-        return tuple(out)
+        bodies = [
+            plant.get_body(BodyIndex(i))
+            for i in range(plant.num_bodies())
+            if i != int(plant.world_body().index())
+        ]
+        bodies = [b for b in bodies if b.get_mass(ctx) > 0.0]
+        counts: dict[str, int] = {}
+        for b in bodies:
+            counts[b.name()] = counts.get(b.name(), 0) + 1
+        return tuple(
+            (
+                b.name()
+                if counts[b.name()] == 1
+                else f"{plant.GetModelInstanceName(b.model_instance())}::{b.name()}",
+                b.index(),
+            )
+            for b in bodies
+        )
 
     @functools.cached_property
     def _mass_seeded(self):
@@ -165,8 +183,8 @@ class ContactModelBase(ABC):
         plant = self.plant.ToAutoDiffXd()
         ctx = plant.CreateDefaultContext()
         T = len(self.massive_bodies)
-        for k, name in enumerate(self.massive_bodies):
-            body = plant.GetBodyByName(name)
+        for k, (_, index) in enumerate(self._massive):
+            body = plant.get_body(index)
             body.SetMass(ctx, AutoDiffXd(body.get_mass(ctx).value(), np.eye(T)[k]))
         return plant, ctx
 

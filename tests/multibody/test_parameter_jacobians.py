@@ -132,3 +132,30 @@ def test_parameter_jacobians_match_independent_identities(name, iz, smoothing):
         np.testing.assert_allclose(
             r.dx_dtheta[0][:, -1], -(r.dx_du[0] @ u) / m, rtol=1e-8, atol=1e-12
         )
+
+
+def test_bodies_of_the_same_name_in_two_instances_get_their_own_mass_parameters():
+    """Two copies of one model file: each body's mass is its own, qualified parameter, and each
+    copy's step depends on its own mass only."""
+    from drake_abs.multibody import Scene
+
+    box = {"file": "drake_abs:models/box_translating.sdf"}
+    scene = Scene.from_dict({
+        "name": "two_boxes", "time_step": 0.01,
+        "models": [{**box, "name": "a"}, {**box, "name": "b"}],
+        "contacts": [{"body": "box", "model": m, "points": [[0.0, 0.0, -0.1]], "friction": 0.5}
+                     for m in ("a", "b")],
+    })  # fmt: skip
+    model = build_scene_model(scene)
+    stepper = model.stepper()
+    names = stepper.parameter_names
+    assert "mass[a::box]" in names and "mass[b::box]" in names and len(set(names)) == len(names)
+    x = np.zeros(model.x0.size)
+    x[[1, 3]] = 0.1  # both resting on the ground (q = x_a, z_a, x_b, z_b)
+    u = np.array([20.0, -5.0])  # pushed, both sliding
+    r = stepper.step(x[None], u, parameters=True)
+    assert r.converged.all()
+    a, b = names.index("mass[a::box]"), names.index("mass[b::box]")
+    va, vb = model.contact_model.nq + 0, model.contact_model.nq + 2  # their x velocities
+    assert abs(r.dx_dtheta[0, va, a]) > 1e-4 and abs(r.dx_dtheta[0, vb, b]) > 1e-4
+    assert r.dx_dtheta[0, va, b] == 0.0 and r.dx_dtheta[0, vb, a] == 0.0
