@@ -4,8 +4,10 @@ the initial posture on its feet, plus a PD law on the actuated joints (docs/math
     u(x) = u_ff + kp (q_ref - q_a) - kd v_a
 
 with ``q_a``, ``v_a`` the actuated joints' positions and velocities, ``q_ref`` their initial
-values, and ``u_ff`` the torques for which gravity, the actuation and equal normal forces at the
-given feet (the robot's weight shared among them) are in balance at the initial posture. Batched
+values, and ``u_ff`` the torques for which gravity, the actuation and normal forces at the given
+feet are in balance at the initial posture: the forces closest to an equal share of the robot's
+weight that balance the unactuated (floating-base) directions too (equal shares when the centre
+of mass is over the feet's centroid, e.g. solo12; go1's is 3 cm behind it). Batched
 over states. Shipped gains per scene in :data:`STANDING_GAINS` (light robots, such as solo12's
 31 g lower legs, need light gains: the PD is explicit in the time step).
 """
@@ -25,6 +27,7 @@ STANDING_GAINS: dict[str, tuple[list[int], list[float], list[float]]] = {
     "hopper": ([0], [50.0, 500.0], [2.0, 40.0]),  # hip (N m/rad), leg (N/m); N m s/rad, N s/m
     "half_cheetah": ([0, 1], [100.0, 100.0, 10.0] * 2, [1.0, 1.0, 0.05] * 2),  # 0.4 kg feet
     "solo12_drop": ([0, 1, 2, 3], [5.0] * 12, [0.1] * 12),  # 31 g lower legs, h = 5 ms
+    "go1_drop": ([0, 1, 2, 3], [20.0] * 12, [0.5] * 12),  # 0.2 kg lower legs, h = 10 ms
 }
 
 
@@ -58,10 +61,19 @@ def standing_controller(
     quant = model.contact_model.quantities(
         model.q0[None], model.v0[None], np.zeros((1, nu)), feet, derivatives=False
     )
-    support = quant.Jn[0].T @ np.full(feet.size, total_mass(model) * GRAVITY / feet.size)
+    Jn = quant.Jn[0]
+    equal = np.full(feet.size, total_mass(model) * GRAVITY / feet.size)
     B = plant.MakeActuationMatrix()
+    # the unactuated directions (the left null space of B) must balance without actuation:
+    # N^T (tau_g + Jn^T f) = 0, solved for the f nearest the equal share (min-norm correction)
+    _, sv, Vt = np.linalg.svd(B.T)
+    N = Vt[np.sum(sv > 1e-12) :].T
+    f = equal
+    if N.shape[1]:
+        f = equal + np.linalg.lstsq(N.T @ Jn.T, -N.T @ (tau_g + Jn.T @ equal), rcond=None)[0]
+    support = Jn.T @ f
     u_ff = np.linalg.lstsq(B, -(tau_g + support), rcond=None)[0]
-    if not np.allclose(B @ u_ff + tau_g + support, 0.0, atol=1e-9):
+    if f.min() < 0 or not np.allclose(B @ u_ff + tau_g + support, 0.0, atol=1e-9):
         raise ValueError("the initial posture cannot be balanced by the actuators on these feet")
     qi, vi = actuated_indices(model)
     kp, kd, q_ref = np.asarray(kp, float), np.asarray(kd, float), model.q0[qi]

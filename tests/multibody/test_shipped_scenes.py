@@ -4,7 +4,7 @@ Jacobian (``gradient="total"``) matches central finite differences of the step a
 contact, under exact contact and under contact-aware smoothing.
 
 Rollouts: the ball and the box are unactuated or pushed by a constant force; the legged robots
-(hopper, half-cheetah, solo12) hold their initial joint angles with a PD law plus the constant
+(hopper, half-cheetah, solo12, go1) hold their initial joint angles with a PD law plus the constant
 torques that hold that posture when the feet share the weight equally (they would fold under
 their own weight without actuation: the step models no joint springs or damping). The PD is
 explicit (torques from the state at the start of the step), so its gains were chosen below the
@@ -36,6 +36,7 @@ SIZES = {
     "hopper": (5, 5, 2, 1),
     "half_cheetah": (9, 9, 6, 4),
     "solo12_drop": (18, 18, 12, 4),
+    "go1_drop": (18, 18, 12, 4),  # example-robot-data's Unitree Go1 as published
     # gymnasium's MuJoCo files as published (their rollouts: tests/multibody/test_model_files.py)
     "gym_hopper": (6, 6, 3, 5),
     "gym_half_cheetah": (9, 9, 6, 7),
@@ -87,11 +88,18 @@ def controller(name, sm):
         return lambda x: np.zeros(0)
     if name == "box_push":
         return lambda x: np.array([2.0])  # N, less than friction's 0.5 m g = 4.9 N
-    feet, kp, kd = STANDING_GAINS[name]  # hopper, half_cheetah, solo12_drop
+    feet, kp, kd = STANDING_GAINS[name]  # hopper, half_cheetah, solo12_drop, go1_drop
     return standing_controller(sm, feet, kp, kd)[0]
 
 
-STEPS = {"ball_throw": 60, "box_push": 60, "hopper": 100, "half_cheetah": 100, "solo12_drop": 120}
+STEPS = {
+    "ball_throw": 60,
+    "box_push": 60,
+    "hopper": 100,
+    "half_cheetah": 100,
+    "solo12_drop": 120,
+    "go1_drop": 120,
+}
 
 
 @functools.cache
@@ -183,6 +191,23 @@ def test_solo12_lands_on_four_feet_and_stands():
     np.testing.assert_allclose(q[[0, 1, 3, 4, 5]], 0, atol=1e-3)  # level, not drifting
     assert np.abs(v[:6]).max() < 0.05
     assert impulses[-1].sum() == pytest.approx(2.5 * G * 0.005, rel=0.1)
+
+
+def test_go1_lands_on_four_feet_and_stands():
+    """Go1 (13.1 kg) from 1 cm up: its feed-forward torques extend the light lower legs at once, so
+    the feet touch within the first step; it then stands on all four feet for the last second,
+    level, the hind feet carrying more (its centre of mass is 3 cm behind the feet's centroid)."""
+    sm = scene_model("go1_drop")
+    assert sm.scene.friction_model == "anitescu"
+    xs, impulses, _ = rollout("go1_drop")
+    q, v = xs[-1, :18], xs[-1, 18:]
+    assert impulses[-100:].min() > 1e-3  # on all four feet for the last 1 s
+    assert 0.26 < q[2] < 0.28  # the feet touch at base z = 0.2738 m
+    np.testing.assert_allclose(q[[0, 1, 3, 4, 5]], 0, atol=1e-2)  # level, not drifting
+    np.testing.assert_allclose(q[6:], sm.q0[6:], atol=2e-2)  # holds its standing posture
+    assert np.abs(v).max() < 0.05
+    assert impulses[-1].sum() == pytest.approx(total_mass(sm) * G * 0.01, rel=0.02)
+    assert impulses[-1][2:].min() > impulses[-1][:2].max()  # hind feet (RR, RL) carry more
 
 
 # --- one-step Jacobians against finite differences ---------------------------------------------
