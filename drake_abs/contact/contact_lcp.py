@@ -283,6 +283,11 @@ class StepQuantities:
     as the product ``dW_times(f) = dW . f`` (a function of f (B, nv) returning (B, nv, P)): the
     step only needs dW applied to the generalised impulse, which a provider can evaluate
     without forming dW (``d(W f) = -W dM(W f)``, one inverse-dynamics derivative).
+
+    The geometric derivatives may be narrow: ``dphi``, ``dJn`` and ``dJt`` may carry only their
+    first K <= P columns (one K for the three), and ``dN`` only its first K_N <= P; the columns
+    left out are zero. A rigid-body provider's distances, Jacobians and N depend on q alone, so
+    K = nq (and K_N = 0 where N is constant) saves storing and reading zeros.
     """
 
     q: np.ndarray
@@ -301,9 +306,32 @@ class StepQuantities:
     dN: np.ndarray | None = None
     dW_times: Callable[[np.ndarray], np.ndarray] | None = None
 
+    def __post_init__(self):
+        if self.dv_free is None:
+            return
+        P = self.dv_free.shape[-1]
+        K = self.dphi.shape[-1]
+        if self.dJn.shape[-1] != K or self.dJt.shape[-1] != K or K > P or self.dN.shape[-1] > P:
+            raise ValueError(
+                f"dphi, dJn, dJt must share their column count K <= P = {P}, and dN have at most "
+                f"P columns; got {self.dphi.shape[-1]}, {self.dJn.shape[-1]}, "
+                f"{self.dJt.shape[-1]} and {self.dN.shape[-1]}"
+            )
+
     @property
     def has_derivatives(self) -> bool:
         return self.dv_free is not None
+
+    def full(self, name: str) -> np.ndarray:
+        """The derivative field ``name`` (``dphi``, ``dJn``, ``dJt``, ``dN``, ...) with all P
+        columns (a narrow one padded with its zero columns)."""
+        d = getattr(self, name)
+        P = self.dv_free.shape[-1]
+        if d.shape[-1] == P:
+            return d
+        out = np.zeros(d.shape[:-1] + (P,))
+        out[..., : d.shape[-1]] = d
+        return out
 
     def dW_dot(self, f: np.ndarray) -> np.ndarray:
         """``dW . f`` (B, nv, P): the derivative of ``W(q) f`` for a fixed f (B, nv)."""
@@ -655,10 +683,10 @@ def _free_step(
             T = par.dphi.shape[-1]
             dv_t = np.zeros((B, nx - nq, T)) if par.dv_free is None else par.dv_free
             dv = np.concatenate([dv, dv_t], axis=-1)
-            dN = np.concatenate([dN, np.zeros(dN.shape[:-1] + (T,))], axis=-1)
         dq = np.zeros((B, nq, dv.shape[-1]))
         dq[:, :, :nq] = np.eye(nq)
-        dq += h * (np.einsum("bqnp,bn->bqp", dN, v_next) + np.einsum("bqn,bnp->bqp", quant.N, dv))
+        dq += h * np.einsum("bqn,bnp->bqp", quant.N, dv)
+        dq[..., : dN.shape[-1]] += h * np.einsum("bqnp,bn->bqp", dN, v_next)
         dx = np.concatenate([dq, dv], axis=1)
         jac = dict(
             dx_dx=dx[:, :, :nx],
@@ -689,26 +717,27 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, 
     nv = quant.v.shape[1]
     P = quant.dv_free.shape[-1]
     lam_v = lam[:, : nc + nt]
-    dG = np.concatenate([quant.dJn, quant.dJt], axis=1)  # (B, nc + nt, nv, P)
     inner, dz_eff = _chain_in(
-        quant.W, G, dG, lam_v, v_next, S, quant.dphi, quant.dv_free, quant.dW_dot(f), z.shape[1]
-    )
+        quant.W, G, quant.dJn, quant.dJt, lam_v, v_next, S, quant.dphi, quant.dv_free,
+        quant.dW_dot(f), z.shape[1],
+    )  # fmt: skip
     dN = quant.dN
-    if gradient == "total":
+    # mu's own derivative: only where mu depends on the state (for a constant policy dmu_dz is
+    # 0, and the total derivative is the frozen one)
+    total = gradient == "total" and not smoothing.is_constant
+    if total:
         # dz_n/dp: the distance and free-velocity part (mu's dependence on F is held)
-        dzn = quant.dphi + h * (
-            np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
-            + np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
-        )
+        dzn = h * np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
+        dzn[..., : quant.dphi.shape[-1]] += quant.dphi
+        dzn[..., : quant.dJn.shape[-1]] += h * np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
     if par is not None:  # theta columns after p
         inner_t, dz_t, dzn_t = _parameter_blocks(quant, cone, h, S, G, lam, f, v_next, par)
         inner = np.concatenate([inner, inner_t], axis=-1)
         dz_eff = np.concatenate([dz_eff, dz_t], axis=-1)
-        dN = np.concatenate([dN, np.zeros(dN.shape[:-1] + (dz_t.shape[-1],))], axis=-1)
-        if gradient == "total":
+        if total:
             dzn = np.concatenate([dzn, dzn_t], axis=-1)
     dlam = lcp.dlam_dq @ dz_eff  # (B, d, P [+ T])
-    if gradient == "total":
+    if total:
         dmu_rows = expand_mu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
         dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
     dx = _chain_out(inner, quant.W, G, dlam, quant.N, dN, v_next, h)  # (B, nq + nv, P [+ T])
@@ -766,33 +795,43 @@ def _check_parameter_shapes(par: ParameterDerivatives, cone: FrictionCone, B: in
 
 
 @nb.njit(cache=True)
-def _chain_in(W, G, dG, lam_v, v_next, S, dphi, dv_free, dWf, d):
+def _chain_in(W, G, dJn, dJt, lam_v, v_next, S, dphi, dv_free, dWf, d):
     """``inner = dv_free + dW f + W dG^T lam`` (B, nv, P) and ``dz_eff`` (B, d, P), the
-    derivative of the LCP's q with F's derivative applied to lam (rows past nc + nt are 0)."""
-    B, r, nv, P = dG.shape
-    nc = dphi.shape[1]
+    derivative of the LCP's q with F's derivative applied to lam (rows past nc + nt are 0).
+    dG is the stack of dJn (B, nc, nv, P) and dJt (B, nt, nv, P), read in place."""
+    B, nc, nv, K = dJn.shape  # K <= P: dG's columns past K are zero (and dphi's past its own)
+    P = dv_free.shape[-1]
+    Kp = dphi.shape[-1]
+    r = nc + dJt.shape[1]
     inner = np.empty((B, nv, P))
     dz = np.zeros((B, d, P))
-    dGl = np.empty((nv, P))
+    dGl = np.empty((nv, K))
     for b in range(B):
         for n in range(nv):
-            for p in range(P):
+            for p in range(K):
                 acc = 0.0
-                for i in range(r):
-                    acc += dG[b, i, n, p] * lam_v[b, i]
+                for i in range(nc):
+                    acc += dJn[b, i, n, p] * lam_v[b, i]
+                for i in range(nc, r):
+                    acc += dJt[b, i - nc, n, p] * lam_v[b, i]
                 dGl[n, p] = acc
         for n in range(nv):
             for p in range(P):
                 acc = dv_free[b, n, p] + dWf[b, n, p]
-                for m in range(nv):
-                    acc += W[b, n, m] * dGl[m, p]
+                if p < K:
+                    for m in range(nv):
+                        acc += W[b, n, m] * dGl[m, p]
                 inner[b, n, p] = acc
         for i in range(r):
             for p in range(P):
                 acc = 0.0
                 for n in range(nv):
-                    acc += dG[b, i, n, p] * v_next[b, n] + G[b, i, n] * inner[b, n, p]
-                dz[b, i, p] = S[i] * acc + (dphi[b, i, p] if i < nc else 0.0)
+                    acc += G[b, i, n] * inner[b, n, p]
+                if p < K:
+                    for n in range(nv):
+                        dG = dJn[b, i, n, p] if i < nc else dJt[b, i - nc, n, p]
+                        acc += dG * v_next[b, n]
+                dz[b, i, p] = S[i] * acc + (dphi[b, i, p] if i < nc and p < Kp else 0.0)
     return inner, dz
 
 
@@ -803,6 +842,7 @@ def _chain_out(inner, W, G, dlam, N, dN, v_next, h):
     B, nv, P = inner.shape
     r = G.shape[1]
     nq = N.shape[1]
+    KN = dN.shape[-1]  # dN's columns past KN are zero
     dx = np.zeros((B, nq + nv, P))
     tmp = np.empty((nv, P))
     for b in range(B):
@@ -822,6 +862,9 @@ def _chain_out(inner, W, G, dlam, N, dN, v_next, h):
             for p in range(P):
                 acc = 0.0
                 for n in range(nv):
-                    acc += dN[b, i, n, p] * v_next[b, n] + N[b, i, n] * dx[b, nq + n, p]
+                    acc += N[b, i, n] * dx[b, nq + n, p]
+                if p < KN:
+                    for n in range(nv):
+                        acc += dN[b, i, n, p] * v_next[b, n]
                 dx[b, i, p] = h * acc + (1.0 if p == i else 0.0)
     return dx

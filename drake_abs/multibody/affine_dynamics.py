@@ -39,7 +39,9 @@ class AffineDynamics:
         self.phi0 = reference["phi"]
         self.Jn, self.Jt, self.N = reference["Jn"], reference["Jt"], reference["N"]
         self.dv_free = reference["dv_free"]
-        self.dphi = reference["dphi"]
+        dphi = np.asarray(reference["dphi"])  # may be narrow (its q columns): padded to P
+        self.dphi = np.zeros((dphi.shape[0], p0.size))
+        self.dphi[:, : dphi.shape[-1]] = dphi
         self.p0 = p0
         self._rows = _tangent_rows(model)
 

@@ -41,6 +41,7 @@ from pydrake.multibody.tree import (
     WeldJoint,
 )
 
+from drake_abs.contact.contact_lcp import StepQuantities
 from drake_abs.multibody.drake_dynamics import ContactModelBase, PointContact
 from drake_abs.multibody.pinocchio_free_joints import FreeJointCoordinates
 
@@ -206,6 +207,10 @@ class PinocchioContactModel(ContactModelBase):
             idx = np.array([i for i, (j, _) in enumerate(self._points) if j == jid])
             self._by_joint.append((jid, idx, np.array([self._points[i][1] for i in idx])))
         self._has_friction = np.array([c.friction is not None for c in self.contacts])
+        #: the joints that carry contacts, and each contact's slot among them
+        self._carriers = [int(j) for j in joints]
+        self._slot = np.array([joints.index(jid) for jid, _ in self._points], dtype=np.int64)
+        self._p_J = np.array([p for _, p in self._points], dtype=float).reshape(-1, 3)
 
     def _pin_q(self, q: np.ndarray) -> np.ndarray:
         """Pinocchio's configuration at Drake's q (the same vector without free joints)."""
@@ -225,13 +230,102 @@ class PinocchioContactModel(ContactModelBase):
             out[idx] = p_J @ X.rotation.T + X.translation
         return out
 
+    def _read_placements(self, H: np.ndarray, b: int) -> None:
+        """Copy the placements (4 x 4) of the joints that carry contacts, after the last forward
+        kinematics, into ``H[b]`` (nj, 4, 4)."""
+        oMi = self.pin_data.oMi
+        for k, jid in enumerate(self._carriers):
+            H[b, k] = oMi[jid].homogeneous
+
+    def _batch_centres(self, H: np.ndarray) -> np.ndarray:
+        """Every contact centre in the world (B, nc, 3) from the carrying joints' placements
+        H (B, nj, 4, 4)."""
+        X = H[:, self._slot]  # (B, nc, 4, 4)
+        return np.einsum("bcij,cj->bci", X[..., :3, :3], self._p_J) + X[..., :3, 3]
+
     def _distances(self, q: np.ndarray) -> np.ndarray:
         model, data = self.pin_model, self.pin_data
-        out = np.empty((len(q), len(self.contacts)))
+        q = np.asarray(q, float)
+        H = np.empty((len(q), len(self._carriers), 4, 4))
         for b, qb in enumerate(q):
-            pin.forwardKinematics(model, data, self._pin_q(np.asarray(qb, float)))
-            out[b] = self._centres() @ self.normal - self._radius - self.ground.height
-        return out
+            pin.forwardKinematics(model, data, self._pin_q(qb))
+            self._read_placements(H, b)
+        return self._batch_centres(H) @ self.normal - self._radius - self.ground.height
+
+    def quantities(self, q, v, u, active=None, *, derivatives=True, kinematics=None):
+        """As the base class; a batch of several states without quaternion floating joints is
+        evaluated in one pass: one pinocchio call per state (``computeABADerivatives``, which
+        also places the joints and fills their Jacobians; or ``computeJointJacobians``, ``aba``
+        and ``computeMinverse`` without derivatives), then every contact row of the batch in
+        one compiled kernel (:func:`_contact_rows_batch`)."""
+        if self._coords is not None or kinematics is not None or self.affine is not None:
+            return super().quantities(
+                q, v, u, active, derivatives=derivatives, kinematics=kinematics
+            )
+        if len(q) < 2:
+            return super().quantities(q, v, u, active, derivatives=derivatives)
+        active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
+        return self._batch_quantities(q, v, u, active, derivatives)
+
+    def _batch_quantities(self, q, v, u, active, derivatives: bool) -> StepQuantities:
+        model, data = self.pin_model, self.pin_data
+        q, v = np.array(q, float), np.array(v, float)  # copies: dW_times holds q
+        B, nq, nv, nu, h = len(q), self.nq, self.nv, self.nu, self.h
+        tau = np.asarray(u, float) @ self.B_act.T
+        W = np.empty((B, nv, nv))
+        a = np.empty((B, nv))
+        J = np.empty((B, 6, nv))
+        H = np.empty((B, len(self._carriers), 4, 4))
+        if derivatives:
+            da_dq = np.empty((B, nv, nv))
+            da_dv = np.empty((B, nv, nv))
+            for b in range(B):
+                da_dq[b], da_dv[b], W[b] = pin.computeABADerivatives(
+                    model, data, q[b], v[b], tau[b]
+                )
+                a[b] = data.ddq
+                J[b] = np.reshape(data.J, (6, nv))
+                self._read_placements(H, b)
+        else:
+            for b in range(B):
+                pin.computeJointJacobians(model, data, q[b])
+                J[b] = np.reshape(data.J, (6, nv))
+                self._read_placements(H, b)
+                a[b] = pin.aba(model, data, q[b], v[b], tau[b])
+                W[b] = pin.computeMinverse(model, data, q[b])
+        upper = np.triu(W)  # pinocchio fills the upper triangle of M^-1
+        W = upper + np.swapaxes(np.triu(W, 1), 1, 2)
+        phi, Jn, Jt, dphi, dJn, dJt = _contact_rows_batch(
+            self._batch_centres(H), np.asarray(active, dtype=np.int64), self._radius,
+            self.normal, float(self.ground.height), self.tangents, self._has_friction, J,
+            self._on_path, self._rank, derivatives, nq,
+        )  # fmt: skip
+        N = np.broadcast_to(self._eye, (B, nq, nv))
+        if not derivatives:
+            return StepQuantities(q=q, v=v, W=W, v_free=v + h * a, phi=phi, Jn=Jn, Jt=Jt, N=N)
+        P = nq + nv + nu
+        dv_free = np.zeros((B, nv, P))
+        dv_free[:, :, :nq] = h * da_dq
+        dv_free[:, :, nq : nq + nv] = np.eye(nv) + h * da_dv
+        dv_free[:, :, nq + nv :] = h * W @ self.B_act
+
+        fm, fd = self._free_model, self._free_data
+        zero = np.zeros(nv)
+
+        def dW_times(f: np.ndarray) -> np.ndarray:  # (B, nv) -> (B, nv, P): -W dM (W f)
+            Wf = np.einsum("bij,bj->bi", W, f)
+            dM_a = np.empty((B, nv, nv))
+            for b in range(B):  # at zero velocity and gravity
+                dM_a[b] = pin.computeRNEADerivatives(fm, fd, q[b], zero, Wf[b])[0]
+            out = np.zeros((B, nv, P))
+            out[:, :, :nq] = -W @ dM_a
+            return out
+
+        return StepQuantities(
+            q=q, v=v, W=W, v_free=v + h * a, phi=phi, Jn=Jn, Jt=Jt, N=N, dv_free=dv_free,
+            dphi=dphi, dJn=dJn, dJt=dJt, dN=np.zeros((B, nq, nv, 0)),  # narrow: q columns; N = I
+            dW_times=dW_times,
+        )  # fmt: skip
 
     def _kinematics(self, q: np.ndarray) -> tuple:
         """``(centres (nc, 3), J (6, nv), maps)`` at Drake's q: every contact centre in the
@@ -315,17 +409,11 @@ class PinocchioContactModel(ContactModelBase):
             dW_f[:, :nq] = -W @ dM_a
             return dW_f
 
-        c = self._contacts(kinematics, active, True)
-
-        def widen(d):  # (..., nq) -> (..., P): only q-columns are non-zero
-            out = np.zeros(d.shape[:-1] + (P,))
-            out[..., :nq] = d
-            return out
-
+        c = self._contacts(kinematics, active, True)  # narrow: the q columns (nq = nv here)
         return dict(
             W=W, v_free=v + h * a, N=self._eye, phi=c["phi"], Jn=c["Jn"], Jt=c["Jt"],
-            dW_times=dW_times, dv_free=dv_free, dphi=widen(c["dphi"]), dJn=widen(c["dJn"]),
-            dJt=widen(c["dJt"]), dN=np.zeros((nq, nv, P)),
+            dW_times=dW_times, dv_free=dv_free, dphi=c["dphi"], dJn=c["dJn"], dJt=c["dJt"],
+            dN=np.zeros((nq, nv, 0)),
         )  # fmt: skip
 
     def _one_free(self, q, v, u, active, derivatives: bool, kinematics) -> dict:
@@ -371,98 +459,142 @@ class PinocchioContactModel(ContactModelBase):
         )  # fmt: skip
 
 
-@nb.njit(cache=True)
 def _contact_rows(
     centres, active, radius, n, height, tangents, friction, J, paths, ranks, derivatives
 ):  # fmt: skip
-    """Rows of the active contacts (indices ``active``, na of them): ``phi`` (na,), ``Jn`` (na,
-    nv), ``Jt`` (nt, nv) and, with ``derivatives``, ``dphi`` (na, nv), ``dJn`` (na, nv, nv),
-    ``dJt`` (nt, nv, nv), in pinocchio's velocities, derivatives with respect to its tangent
-    increments (Drake's q and v for 1-dof joints).
+    """Rows of the active contacts (indices ``active``, na of them) of one state: ``phi`` (na,),
+    ``Jn`` (na, nv), ``Jt`` (nt, nv) and, with ``derivatives``, ``dphi`` (na, nv), ``dJn`` (na,
+    nv, nv), ``dJt`` (nt, nv, nv); centres (nc, 3), J (6, nv). :func:`_contact_rows_batch` with
+    a batch of one."""
+    out = _contact_rows_batch(
+        centres[None], active, radius, n, height, tangents, friction,
+        np.ascontiguousarray(J)[None], paths, ranks, derivatives, J.shape[1],
+    )  # fmt: skip
+    return tuple(x[0] for x in out)
 
-    Per candidate: centres (nc, 3) in the world (the witness point is ``Q = C - radius n``),
-    radius (nc,), friction (nc,) whether it has friction, paths (nc, nv) the velocity indices on
-    its body's path from the world (root first, -1 padded), ranks (nc, nv) the rank on that path
-    of the joint each index belongs to. J (6, nv): the world-frame joint Jacobians (linear rows
-    first) of all joints. The body joint's Jacobian is J restricted to its path's columns, so a
-    point p fixed on the body moves with ``J_p = Jv - [p]x Jw``.
+
+@nb.njit(cache=True)
+def _contact_rows_batch(
+    centres, active, radius, n, height, tangents, friction, J, paths, ranks, derivatives, width
+):  # fmt: skip
+    """Rows of the active contacts (indices ``active``, na of them) for B states: ``phi`` (B,
+    na), ``Jn`` (B, na, nv), ``Jt`` (B, nt, nv) and, with ``derivatives``, ``dphi`` (B, na, nv),
+    ``dJn`` (B, na, nv, nv), ``dJt`` (B, nt, nv, nv), in pinocchio's velocities, derivatives
+    with respect to its tangent increments (Drake's q and v for 1-dof joints). The derivative
+    arrays have ``width`` >= nv columns (e.g. P = nq + nv + nu), zero past the first nv.
+
+    Per state: centres (B, nc, 3) every candidate's centre in the world (the witness point is
+    ``Q = C - radius n``) and J (B, 6, nv) the world-frame joint Jacobians (linear rows first)
+    of all joints. Per candidate: radius (nc,), friction (nc,) whether it has friction, paths
+    (nc, nv) the velocity indices on its body's path from the world (root first, -1 padded),
+    ranks (nc, nv) the rank on that path of the joint each index belongs to. The body joint's
+    Jacobian is J restricted to its path's columns, so a point p fixed on the body moves with
+    ``J_p = Jv - [p]x Jw``.
+
+    Derivative of J_Q = Jv - [Q]x Jw: a column S_j moves with an increment along column S_k of
+    its own joint or of a joint before it on the path (pinocchio moves a joint's frame by
+    ``X exp(d)``: every motion after it is carried along): ``dS_j/dk = S_k x S_j`` (spatial
+    cross product), so ``dJv_j/dk = w_k x v_j + v_k x w_j`` and ``dJw_j/dk = w_k x w_j``; then
+    ``dJ_Q[:, j, k] = dJv_j/dk - Q x dJw_j/dk - (J_C[:, k]) x Jw[:, j]``, with J_C the
+    Jacobian of the body-fixed point C. No array is allocated per state or contact.
     """
+    B = centres.shape[0]
     na = active.shape[0]
-    nv = J.shape[1]
+    nv = J.shape[2]
     k = tangents.shape[0]
     nt = 0
     for a in active:
         if friction[a]:
             nt += k
-    phi = np.empty(na)
-    Jn = np.zeros((na, nv))
-    Jt = np.zeros((nt, nv))
+    phi = np.empty((B, na))
+    Jn = np.zeros((B, na, nv))
+    Jt = np.zeros((B, nt, nv))
     m = nv if derivatives else 0
-    dphi = np.zeros((na, m))
-    dJn = np.zeros((na, m, m))
-    dJt = np.zeros((nt, m, m))
-    row_t = 0
-    for i in range(na):
-        c = active[i]
-        C = centres[c]
-        Q = C - radius[c] * n
-        phi[i] = n[0] * C[0] + n[1] * C[1] + n[2] * C[2] - radius[c] - height
-        count = 0
-        while count < nv and paths[c, count] >= 0:
-            count += 1
-        path = paths[c, :count]
-        rank = ranks[c, :count]
-        Jv = np.zeros((3, nv))
-        Jw = np.zeros((3, nv))
-        for j in path:
-            Jv[:, j] = J[:3, j]
-            Jw[:, j] = J[3:, j]
-        J_Q = np.zeros((3, nv))
-        J_C = np.zeros((3, nv))
-        for j in path:
-            J_Q[:, j] = Jv[:, j] - np.cross(Q, Jw[:, j])
-            J_C[:, j] = Jv[:, j] - np.cross(C, Jw[:, j])
-        Jn[i] = n @ J_Q
-        if friction[c]:
-            Jt[row_t : row_t + k] = tangents @ J_Q
-        if derivatives:
-            dphi[i] = n @ J_C
-            dJ_Q = _point_jacobian_derivative(Jv, Jw, path, rank, J_C, Q)
-            for a in range(nv):
-                for b in range(nv):
-                    d = dJ_Q[:, a, b]
-                    dJn[i, a, b] = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
-                    if friction[c]:
-                        for t in range(k):
-                            tt = tangents[t]
-                            dJt[row_t + t, a, b] = tt[0] * d[0] + tt[1] * d[1] + tt[2] * d[2]
-        if friction[c]:
-            row_t += k
+    w = width if derivatives else 0
+    dphi = np.zeros((B, na, w))
+    dJn = np.zeros((B, na, m, w))
+    dJt = np.zeros((B, nt, m, w))
+    J_Q = np.empty((3, nv))
+    J_C = np.empty((3, nv))
+    d = np.empty(3)
+    for s in range(B):
+        row_t = 0
+        for i in range(na):
+            c = active[i]
+            C0, C1, C2 = centres[s, c, 0], centres[s, c, 1], centres[s, c, 2]
+            r = radius[c]
+            Q0, Q1, Q2 = C0 - r * n[0], C1 - r * n[1], C2 - r * n[2]
+            phi[s, i] = n[0] * C0 + n[1] * C1 + n[2] * C2 - r - height
+            count = 0
+            while count < nv and paths[c, count] >= 0:
+                count += 1
+            J_Q[:] = 0.0
+            J_C[:] = 0.0
+            for p in range(count):
+                j = paths[c, p]
+                v0, v1, v2 = J[s, 0, j], J[s, 1, j], J[s, 2, j]
+                w0, w1, w2 = J[s, 3, j], J[s, 4, j], J[s, 5, j]
+                J_Q[0, j] = v0 - (Q1 * w2 - Q2 * w1)
+                J_Q[1, j] = v1 - (Q2 * w0 - Q0 * w2)
+                J_Q[2, j] = v2 - (Q0 * w1 - Q1 * w0)
+                J_C[0, j] = v0 - (C1 * w2 - C2 * w1)
+                J_C[1, j] = v1 - (C2 * w0 - C0 * w2)
+                J_C[2, j] = v2 - (C0 * w1 - C1 * w0)
+            for j in range(nv):
+                Jn[s, i, j] = n[0] * J_Q[0, j] + n[1] * J_Q[1, j] + n[2] * J_Q[2, j]
+                if derivatives:
+                    dphi[s, i, j] = n[0] * J_C[0, j] + n[1] * J_C[1, j] + n[2] * J_C[2, j]
+            if friction[c]:
+                for t in range(k):
+                    for j in range(nv):
+                        Jt[s, row_t + t, j] = (
+                            tangents[t, 0] * J_Q[0, j]
+                            + tangents[t, 1] * J_Q[1, j]
+                            + tangents[t, 2] * J_Q[2, j]
+                        )
+            if derivatives:
+                for a in range(count):
+                    kk = paths[c, a]
+                    wk0, wk1, wk2 = J[s, 3, kk], J[s, 4, kk], J[s, 5, kk]
+                    vk0, vk1, vk2 = J[s, 0, kk], J[s, 1, kk], J[s, 2, kk]
+                    for b in range(count):
+                        j = paths[c, b]
+                        vj0, vj1, vj2 = J[s, 0, j], J[s, 1, j], J[s, 2, j]
+                        wj0, wj1, wj2 = J[s, 3, j], J[s, 4, j], J[s, 5, j]
+                        d[:] = 0.0
+                        if ranks[c, b] >= ranks[c, a]:
+                            # w_k x v_j + v_k x w_j - Q x (w_k x w_j)
+                            x0 = wk1 * wj2 - wk2 * wj1
+                            x1 = wk2 * wj0 - wk0 * wj2
+                            x2 = wk0 * wj1 - wk1 * wj0
+                            d[0] = (
+                                (wk1 * vj2 - wk2 * vj1)
+                                + (vk1 * wj2 - vk2 * wj1)
+                                - (Q1 * x2 - Q2 * x1)
+                            )
+                            d[1] = (
+                                (wk2 * vj0 - wk0 * vj2)
+                                + (vk2 * wj0 - vk0 * wj2)
+                                - (Q2 * x0 - Q0 * x2)
+                            )
+                            d[2] = (
+                                (wk0 * vj1 - wk1 * vj0)
+                                + (vk0 * wj1 - vk1 * wj0)
+                                - (Q0 * x1 - Q1 * x0)
+                            )
+                        # - J_C[:, k] x Jw[:, j]
+                        c0, c1, c2 = J_C[0, kk], J_C[1, kk], J_C[2, kk]
+                        d[0] -= c1 * wj2 - c2 * wj1
+                        d[1] -= c2 * wj0 - c0 * wj2
+                        d[2] -= c0 * wj1 - c1 * wj0
+                        dJn[s, i, j, kk] = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
+                        if friction[c]:
+                            for t in range(k):
+                                dJt[s, row_t + t, j, kk] = (
+                                    tangents[t, 0] * d[0]
+                                    + tangents[t, 1] * d[1]
+                                    + tangents[t, 2] * d[2]
+                                )
+            if friction[c]:
+                row_t += k
     return phi, Jn, Jt, dphi, dJn, dJt
-
-
-@nb.njit(cache=True)
-def _point_jacobian_derivative(Jv, Jw, path, rank, J_C, Q):
-    """d J_Q / d(tangent increment) (3, nv, nv) of ``J_Q = Jv - [Q]x Jw`` for the point
-    Q = C - r n, from the body joint's world-frame Jacobian (Jv, Jw (3, nv)), the velocity
-    indices on its path from the world (root first) and their joints' ranks on the path, the
-    Jacobian J_C of the body-fixed point C and Q's world position.
-
-    A column S_j moves with an increment along column S_k of its own joint or of a joint before
-    it on the path (pinocchio moves a joint's frame by ``X exp(d)``: every motion after it is
-    carried along): ``dS_j/dk = S_k x S_j`` (spatial cross product), so ``dJv_j/dk = w_k x v_j
-    + v_k x w_j`` and ``dJw_j/dk = w_k x w_j``; then ``dJ_Q[:, j, k] = dJv_j/dk - Q x dJw_j/dk
-    - (J_C[:, k]) x Jw[:, j]``.
-    """
-    nv = Jv.shape[1]
-    out = np.zeros((3, nv, nv))
-    for a in range(path.shape[0]):
-        k = path[a]
-        for b in range(path.shape[0]):
-            j = path[b]
-            dv = np.zeros(3)
-            if rank[b] >= rank[a]:
-                wk, vk, vj, wj = Jw[:, k], Jv[:, k], Jv[:, j], Jw[:, j]
-                dv = np.cross(wk, vj) + np.cross(vk, wj) - np.cross(Q, np.cross(wk, wj))
-            out[:, j, k] = dv - np.cross(J_C[:, k], Jw[:, j])
-    return out

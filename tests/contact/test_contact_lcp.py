@@ -2,12 +2,15 @@
 quantities are smooth closed forms: the assembled step Jacobian against central finite
 differences of the whole step, with and without friction, frozen and total."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from numdiff import central_difference
 
 from drake_abs import ContactAware, Exact, Fixed, solve_lcp
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities, assemble_lcp, contact_step
+from drake_abs.multibody import build_scene_model
 
 H = 0.01
 CORNERS = np.array([[-0.2, -0.1], [0.2, -0.1]])  # box-frame corners touching the ground
@@ -112,3 +115,32 @@ def test_step_jacobians_match_finite_differences(cone, state, policy, gradient):
     fd = central_difference(step, np.concatenate([q, v, u]), eps=1e-7)
     analytic = np.concatenate([r.dx_dx[0], r.dx_du[0]], axis=1)
     np.testing.assert_allclose(analytic, fd, atol=2e-5 * (1 + np.abs(fd).max()))
+
+
+def test_narrow_geometric_derivatives_give_the_same_step(rng):
+    """Narrow dphi, dJn, dJt, dN (their first K columns; the rest zero) step exactly as their
+    full-width padding, and mismatched widths are refused by name."""
+    sm = build_scene_model("box_push")
+    model = sm.contact_model
+    B = 4
+    x = np.tile(sm.x0, (B, 1))
+    x[:, model.nq] = rng.uniform(-1.0, 1.0, B)
+    q, v = x[:, : model.nq], x[:, model.nq :]
+    u = rng.uniform(-5, 5, (B, model.nu))
+    quant = model.quantities(q, v, u)
+    P = quant.dv_free.shape[-1]
+    K = model.nq
+    for name in ("dphi", "dJn", "dJt", "dN"):  # this provider's rows do not depend on v, u
+        assert np.abs(quant.full(name)[..., K:]).max(initial=0.0) == 0.0
+    wide = replace(quant, **{n: quant.full(n) for n in ("dphi", "dJn", "dJt", "dN")})
+    narrow = replace(quant, **{n: quant.full(n)[..., :K] for n in ("dphi", "dJn", "dJt")},
+                     dN=quant.full("dN")[..., :0])  # fmt: skip
+    assert wide.dJn.shape[-1] == P and narrow.dJn.shape[-1] == K
+    cone = model.cone
+    for smoothing in (Exact(), ContactAware(1e-3, 0.02)):
+        a = contact_step(wide, cone, model.h, smoothing)
+        b = contact_step(narrow, cone, model.h, smoothing)
+        for key in ("q_next", "v_next", "lam", "dx_dx", "dx_du", "dlam_dx", "dlam_du"):
+            np.testing.assert_allclose(getattr(b, key), getattr(a, key), rtol=0, atol=1e-13)
+    with pytest.raises(ValueError, match="dphi, dJn, dJt must share"):
+        replace(wide, dJn=quant.full("dJn")[..., :K])

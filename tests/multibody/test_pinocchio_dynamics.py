@@ -28,6 +28,16 @@ SCENES = sorted(
     for p in (PACKAGE_DIR / "scenes").glob("*.yaml")
     if Scene.from_yaml(p).dynamics != "drake"
 )
+
+NARROW = ("dphi", "dJn", "dJt", "dN")
+
+
+def _field(quant, name: str):
+    """A quantity, derivatives with all P columns (providers may give narrow ones)."""
+    value = getattr(quant, name)
+    return quant.full(name) if value is not None and name in NARROW else value
+
+
 FIELDS = ("W", "v_free", "phi", "Jn", "Jt", "N", "dv_free", "dphi", "dJn", "dJt", "dN")
 
 
@@ -47,7 +57,7 @@ def test_quantities_and_derivatives_match_drake(name, rng):
         a = drake.quantities(q, v, u, active)
         b = ours.quantities(q, v, u, active)
         for field in FIELDS:
-            x, y = getattr(a, field), getattr(b, field)
+            x, y = _field(a, field), _field(b, field)
             assert x.shape == y.shape, field
             scale = 1.0 + np.abs(x).max(initial=0.0)
             assert np.abs(x - y).max(initial=0.0) <= 1e-11 * scale, field
@@ -62,10 +72,8 @@ def test_quantities_and_derivatives_match_drake(name, rng):
             assert np.abs(x - y).max() <= 1e-11 * scale, "dW . f"
         c = ours.quantities(q, v, u, active, derivatives=False)
         for field in FIELDS[:6]:  # aba and its derivative routine round differently
-            x = getattr(b, field)
-            np.testing.assert_allclose(
-                getattr(c, field), x, rtol=0, atol=1e-13 * (1 + abs(x).max())
-            )
+            x = _field(b, field)
+            np.testing.assert_allclose(_field(c, field), x, rtol=0, atol=1e-13 * (1 + abs(x).max()))
     np.testing.assert_allclose(ours.distances(q), drake.distances(q), rtol=0, atol=1e-12)
 
 
@@ -158,9 +166,40 @@ def test_quantities_within_equals_distances_then_quantities(name, rng):
     # Two code paths (one shared kinematics pass against two separate ones) over the same
     # pinocchio algorithms: equal up to roundoff, not promised bit for bit across versions.
     for field in FIELDS:
-        g, w = getattr(got, field), getattr(want, field)
+        g, w = _field(got, field), _field(want, field)
         if w is None:
             assert g is None, field
             continue
         scale = 1.0 + np.abs(w).max(initial=0.0)
         np.testing.assert_allclose(g, w, rtol=0, atol=1e-13 * scale, err_msg=field)
+
+
+@pytest.mark.parametrize("name", ["gym_half_cheetah", "solo12_drop", "box_push"])
+def test_batched_pass_equals_the_per_state_pass(name, rng):
+    """A batch is evaluated in one pass (one pinocchio call per state, every contact row in one
+    kernel); each state's quantities equal those of a one-state batch, for a subset of the
+    contacts, with and without derivatives (rounding of the batched products only)."""
+    sm = build_scene_model(name)
+    model = sm.contact_model
+    B = 6
+    q = sm.q0 + 0.1 * rng.standard_normal((B, model.nq))
+    v, u = rng.standard_normal((B, model.nv)), rng.standard_normal((B, model.nu))
+    active = np.arange(len(model.contacts))[::2]
+    for derivatives in (False, True):
+        batch = model.quantities(q, v, u, active, derivatives=derivatives)
+        one = [model.quantities(q[i : i + 1], v[i : i + 1], u[i : i + 1], active,
+                                derivatives=derivatives) for i in range(B)]  # fmt: skip
+        for field in FIELDS:
+            x = _field(batch, field)
+            if x is None:
+                assert not derivatives
+                continue
+            y = np.concatenate([_field(o, field) for o in one])
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-14 * (1 + np.abs(y).max()))
+    f = rng.standard_normal((B, model.nv))
+    y = np.concatenate([o.dW_dot(f[i : i + 1]) for i, o in enumerate(one)])
+    np.testing.assert_allclose(batch.dW_dot(f), y, rtol=0, atol=1e-13 * (1 + np.abs(y).max()))
+    # the geometric derivatives are narrow: their q columns only
+    assert batch.dJn.shape[-1] == model.nq and batch.dN.shape[-1] <= model.nq
+    each = np.concatenate([model.distances(q[i : i + 1]) for i in range(B)])
+    np.testing.assert_array_equal(model.distances(q), each)
