@@ -46,7 +46,12 @@ from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatc
 from drake_abs.lcp import ipm
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody import Scene, build_scene_model
-from drake_abs.multibody.posture import STANDING_GAINS, standing_controller
+from drake_abs.multibody.posture import (
+    SOLO12_TROT,
+    STANDING_GAINS,
+    standing_controller,
+    stepping_controller,
+)
 from drake_abs.multibody.stepper import StepOverflowWarning
 
 SMOOTHINGS = {
@@ -69,17 +74,15 @@ def _controller(name: str, model, rng: np.random.Generator):
         return lambda t, x: rng.uniform(-8.0, 8.0, (len(x), nu))
     base = name.replace("_standing", "").replace("_stepping", "")
     feet, kp, kd = STANDING_GAINS[base]
-    hold, u_ff = standing_controller(model, feet, kp, kd)
-    kp = np.broadcast_to(np.asarray(kp, float), (nu,))
-    noise = 0.05 * np.maximum(np.abs(u_ff), kp * 0.1)
-    swing, phase = np.zeros(nu), np.zeros(nu)
-    if name.endswith("stepping"):  # solo12: per leg (HAA, HFE, KFE); legs FL, FR, HL, HR
-        swing = np.tile([0.0, 0.3, 0.3], 4)
-        phase = np.repeat([0.0, np.pi, np.pi, 0.0], 3)
+    _, u_ff = standing_controller(model, feet, kp, kd)
+    noise = 0.05 * np.maximum(np.abs(u_ff), np.broadcast_to(np.asarray(kp, float), (nu,)) * 0.1)
+    swing, phase, frequency = np.zeros(nu), np.zeros(nu), 0.0
+    if name.endswith("stepping"):  # solo12
+        swing, phase, frequency = SOLO12_TROT
+    drive = stepping_controller(model, feet, kp, kd, swing, phase, frequency)
 
     def u(t, x):
-        drive = kp * swing * np.sin(2 * np.pi * 2.0 * t + phase)
-        return hold(x) + drive + noise * rng.standard_normal((len(x), nu))
+        return drive(t, x) + noise * rng.standard_normal((len(x), nu))
 
     return u
 

@@ -27,6 +27,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "smoothing-vs-rs": "smoothing_vs_rs",
     "speed-accuracy": "speed_accuracy",
     "mujoco-comparison": "mujoco_comparison",
+    "scene-recordings": "scene_recordings",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 

@@ -83,3 +83,30 @@ def standing_controller(
         return u_ff + kp * (q_ref - x[..., qi]) - kd * x[..., nq + vi]
 
     return u, u_ff
+
+
+#: a trot-like swing of solo12's reference (per leg HAA, HFE, KFE; legs FL, FR, HL, HR): hip and
+#: knee pitch swung by 0.3 rad, diagonal legs together (phases 0 and pi), at 2 Hz
+SOLO12_TROT: tuple[np.ndarray, np.ndarray, float] = (
+    np.tile([0.0, 0.3, 0.3], 4),
+    np.repeat([0.0, np.pi, np.pi, 0.0], 3),
+    2.0,
+)
+
+
+def stepping_controller(
+    model: SceneModel, feet, kp, kd, swing, phase, frequency: float
+) -> Callable[[float, np.ndarray], np.ndarray]:
+    """``u(t, x)``: the standing controller of :func:`standing_controller` with its joint
+    reference swung as ``q_ref + swing sin(2 pi frequency t + phase)`` (swing in rad or m per
+    actuated joint, phase in rad, frequency in Hz; t in s). x (nx,) or (B, nx)."""
+    hold, _ = standing_controller(model, feet, kp, kd)
+    nu = model.plant.num_actuators()
+    kp = np.broadcast_to(np.asarray(kp, float), (nu,))
+    swing = np.broadcast_to(np.asarray(swing, float), (nu,))
+    phase = np.broadcast_to(np.asarray(phase, float), (nu,))
+
+    def u(t: float, x: np.ndarray) -> np.ndarray:
+        return hold(x) + kp * swing * np.sin(2.0 * np.pi * frequency * t + phase)
+
+    return u

@@ -1,0 +1,55 @@
+"""The scene recordings' rollouts (issue 14, item 4) do what the physics says, without writing
+pages (the pages themselves are checked in a browser in tests/diagrams/test_meshcat_render.py):
+the robots land and stand on their feet, Solo12's stepping moves its feet, and the pushed box
+behaves as quasi-static pushing predicts (a push through the centre line translates it, a push
+to one side turns it away from that side, and the mirrored push mirrors the motion)."""
+
+import numpy as np
+import pytest
+
+from drake_abs.experiments.scene_recordings import Config, report, rollout, run
+
+
+@pytest.fixture(scope="module")
+def legged():
+    names = ("solo12_standing", "solo12_stepping", "go1_standing")
+    return {r["recording"]: r for r in run(Config(duration=1.0, recordings=names))["rows"]}
+
+
+def test_quadrupeds_land_and_stand(legged):
+    for name in ("solo12_standing", "go1_standing"):
+        r = legged[name]
+        assert r["unconverged_steps"] == 0 and r["deepest_penetration_m"] < 1e-6
+        assert 0.2 < r["base_height_end_m"] < r["base_height_start_m"], r  # landed, upright
+        sm, xs, _ = rollout(name, 1.0)
+        nq = sm.contact_model.nq
+        feet = sm.contact_model.distances(xs[-1:, :nq])[0]
+        assert np.abs(feet).max() < 1e-3, feet  # all four feet on the ground
+        assert np.abs(xs[-1, nq:]).max() < 0.05  # at rest (rad/s, m/s)
+    assert legged["solo12_stepping"]["unconverged_steps"] == 0
+
+
+def test_stepping_moves_the_feet_where_standing_holds_them():
+    _, standing, _ = rollout("solo12_standing", 1.0)
+    sm, stepping, _ = rollout("solo12_stepping", 1.0)
+    nq = sm.contact_model.nq
+    spread = [np.ptp(sm.contact_model.distances(xs[100:, :nq]), axis=0).max()
+              for xs in (standing, stepping)]  # fmt: skip
+    assert spread[0] < 5e-3 < spread[1], spread  # feet lift (m) only when stepping
+
+
+def test_pushed_box_follows_quasi_static_pushing():
+    rows = {}
+    for offset in (0.0, 0.05, -0.05):
+        summary = run(Config(duration=1.5, recordings=("pusher_box",), push_offset=offset))
+        rows[offset] = summary["rows"][0]
+        assert rows[offset]["unconverged_steps"] == 0
+    centre, left, right = rows[0.0], rows[0.05], rows[-0.05]
+    assert centre["box_displacement_m"][0] > 0.05  # pushed along +x
+    assert abs(centre["box_yaw_rad"]) < 1e-6 and abs(centre["box_displacement_m"][1]) < 1e-6
+    assert left["box_yaw_rad"] < -0.05  # pushed on its +y side: turns clockwise
+    np.testing.assert_allclose(right["box_yaw_rad"], -left["box_yaw_rad"], rtol=1e-6)
+    np.testing.assert_allclose(
+        right["box_displacement_m"], left["box_displacement_m"] * np.array([1, -1]), atol=1e-6
+    )
+    assert "pusher_box" in report({"duration_s": 1.5, "rows": [left]})
