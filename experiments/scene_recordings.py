@@ -143,9 +143,9 @@ def _base_height(sm, xs: np.ndarray) -> np.ndarray:
     return np.array(heights)
 
 
-def run(config: Config | None = None, out: str | Path | None = None, *, meshcat=None) -> dict:
-    """Roll every recording out and, with ``out``, write its HTML page there (drawn in
-    ``meshcat``: a pydrake Meshcat, by default a new one bound to localhost)."""
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Roll every recording out and, with ``out``, write its HTML page there (drawn in a new
+    Meshcat bound to localhost)."""
     config = config or Config()
     unknown = set(config.recordings) - set(RECORDINGS)
     if unknown:
@@ -158,7 +158,7 @@ def run(config: Config | None = None, out: str | Path | None = None, *, meshcat=
                "steps": len(xs) - 1, "unconverged_steps": unconverged,
                **_facts(name, sm, xs)}  # fmt: skip
         if folder is not None:
-            page = record_rollout_html(sm.scene, xs, folder / f"{name}.html", meshcat=meshcat)
+            page = record_rollout_html(sm.scene, xs, folder / f"{name}.html")
             row.update(html=page.name, html_bytes=page.stat().st_size)
         rows.append(row)
     summary = {"duration_s": config.duration, "rows": rows}

@@ -62,13 +62,33 @@ def implicit_damping(
         dv = quant.dv_free - h * inner_dW_dot(D * v_free2)
         values.update(dW=None, dW_times=dW_times, dv_free=A @ dv)
     out = replace(quant, **values)
-    if parameters is not None and (parameters.dW is not None or parameters.dv_free is not None):
-        T = parameters.dphi.shape[-1]
-        dW_t = np.zeros((B, nv, nv, T)) if parameters.dW is None else parameters.dW
-        dv_t = np.zeros((B, nv, T)) if parameters.dv_free is None else parameters.dv_free
-        # dW'_t = A dW_t (I - h D W'), dv_free'_t = A (dv_t - h dW_t D v_free')
-        right = np.eye(nv) - h * D[None, :, None] * W2  # (B, nv, nv)
-        dW2 = np.einsum("bij,bjkt,bkl->bilt", A, dW_t, right)
-        dv2 = np.einsum("bij,bjt->bit", A, dv_t - h * np.einsum("bjkt,bk->bjt", dW_t, D * v_free2))
-        parameters = replace(parameters, dW=dW2, dv_free=dv2)
+    if parameters is not None:
+        parameters = damped_parameters(parameters, W2, v_free2, D, h)
     return out, parameters
+
+
+def damped_parameters(
+    parameters: ParameterDerivatives,
+    W_damped: np.ndarray,
+    v_free_damped: np.ndarray,
+    damping: np.ndarray,
+    h: float,
+) -> ParameterDerivatives:
+    """Model-parameter derivatives of the undamped W and v_free carried to the damped step's
+    (module docstring), given the damped ``W_damped`` (B, nv, nv) and ``v_free_damped`` (B,
+    nv): ``dW'_t = A dW_t (I - h D W')``, ``dv_free'_t = A (dv_t - h dW_t D v_free')`` with
+    ``A = (I + h W D)^-1 = I - h W' D``. Unchanged where no parameter moves W or v_free."""
+    if parameters.dW is None and parameters.dv_free is None:
+        return parameters
+    D = np.asarray(damping, dtype=float)
+    B, nv = v_free_damped.shape
+    T = parameters.dphi.shape[-1]
+    A = np.eye(nv) - h * W_damped * D[None, None, :]
+    dW_t = np.zeros((B, nv, nv, T)) if parameters.dW is None else parameters.dW
+    dv_t = np.zeros((B, nv, T)) if parameters.dv_free is None else parameters.dv_free
+    right = np.eye(nv) - h * D[None, :, None] * W_damped  # (B, nv, nv)
+    dW2 = np.einsum("bij,bjkt,bkl->bilt", A, dW_t, right)
+    dv2 = np.einsum(
+        "bij,bjt->bit", A, dv_t - h * np.einsum("bjkt,bk->bjt", dW_t, D * v_free_damped)
+    )
+    return replace(parameters, dW=dW2, dv_free=dv2)

@@ -21,6 +21,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
+from drake_abs.contact.damping import implicit_damping
 from drake_abs.multibody.affine_dynamics import AffineDynamics
 from drake_abs.multibody.floating import quaternion_starts
 from drake_abs.multibody.geometry_contacts import PairContact, pair_geometry, pair_tangents
@@ -232,11 +233,21 @@ class ContactModelBase(ABC):
         *,
         derivatives: bool = True,
         kinematics=None,
+        damping: np.ndarray | None = None,
     ) -> StepQuantities:
         """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
         (indices; all by default), with derivatives with respect to p = (q, v, u) unless
         ``derivatives=False``. ``kinematics``: a provider's own kinematics of a one-state batch,
-        already evaluated at q (see :meth:`quantities_within`)."""
+        already evaluated at q (see :meth:`quantities_within`). ``damping``: joint damping per
+        velocity (nv,), taken implicitly (:mod:`drake_abs.contact.damping`): the quantities of
+        the damped step (W = (M + h D)^-1 and its free velocity)."""
+        quant = self._quantities(q, v, u, active, derivatives, kinematics)
+        if damping is not None and np.any(damping):
+            quant = implicit_damping(quant, damping, self.h)[0]
+        return quant
+
+    def _quantities(self, q, v, u, active, derivatives: bool, kinematics) -> StepQuantities:
+        """The undamped quantities of :meth:`quantities`."""
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
         if self.affine is not None and kinematics is None:  # one evaluation serves every state
             return self.affine.quantities(q, v, u, active, derivatives=derivatives)
@@ -259,13 +270,13 @@ class ContactModelBase(ABC):
 
     def quantities_within(
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray, distance: float, *,
-        derivatives: bool = True,
+        derivatives: bool = True, damping: np.ndarray | None = None,
     ) -> tuple[np.ndarray, StepQuantities]:  # fmt: skip
         """For one state (q (1, nq), v (1, nv), u (1, nu)): the indices of the candidates within
         ``distance`` (m) and their quantities. Providers may share the kinematics between the
         two (pinocchio does); the result equals ``distances`` then ``quantities``."""
         active = np.flatnonzero(self.distances(q)[0] <= distance)
-        return active, self.quantities(q, v, u, active, derivatives=derivatives)
+        return active, self.quantities(q, v, u, active, derivatives=derivatives, damping=damping)
 
     @abstractmethod
     def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:

@@ -252,26 +252,46 @@ class PinocchioContactModel(ContactModelBase):
             self._read_placements(H, b)
         return self._batch_centres(H) @ self.normal - self._radius - self.ground.height
 
-    def quantities(self, q, v, u, active=None, *, derivatives=True, kinematics=None):
+    def quantities(
+        self, q, v, u, active=None, *, derivatives=True, kinematics=None, damping=None
+    ) -> StepQuantities:
         """As the base class; a batch of several states without quaternion floating joints is
         evaluated in one pass: one pinocchio call per state (``computeABADerivatives``, which
         also places the joints and fills their Jacobians; or ``computeJointJacobians``, ``aba``
         and ``computeMinverse`` without derivatives), then every contact row of the batch in
-        one compiled kernel (:func:`_contact_rows_batch`)."""
-        if self._coords is not None or kinematics is not None or self.affine is not None:
+        one compiled kernel (:func:`_contact_rows_batch`). Joint damping is then taken in the
+        same call: the model's armature plus ``h D`` gives ``M + h D`` and the torque ``tau - D
+        v``, so ``W = (M + h D)^-1`` and the damped free velocity come out of the one ABA
+        (equal to :func:`~drake_abs.contact.damping.implicit_damping` of the undamped ones)."""
+        batch = self._coords is None and kinematics is None and self.affine is None
+        if not batch or len(q) < 2:
             return super().quantities(
-                q, v, u, active, derivatives=derivatives, kinematics=kinematics
+                q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping
             )
-        if len(q) < 2:
-            return super().quantities(q, v, u, active, derivatives=derivatives)
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
-        return self._batch_quantities(q, v, u, active, derivatives)
+        D = None if damping is None or not np.any(damping) else np.asarray(damping, float)
+        return self._batch_quantities(q, v, u, active, derivatives, D)
 
-    def _batch_quantities(self, q, v, u, active, derivatives: bool) -> StepQuantities:
-        model, data = self.pin_model, self.pin_data
+    def _damped_model(self, D: np.ndarray | None) -> tuple:
+        """``(model, data)`` whose mass matrix is M + h D (armature plus h D; the model itself
+        for D None), built once per D."""
+        if D is None:
+            return self.pin_model, self.pin_data
+        cache = self.__dict__.setdefault("_damped_models", {})
+        key = D.tobytes()
+        if key not in cache:
+            model = self.pin_model.copy()
+            model.armature = self.pin_model.armature + self.h * D
+            cache[key] = (model, model.createData())
+        return cache[key]
+
+    def _batch_quantities(self, q, v, u, active, derivatives: bool, D) -> StepQuantities:
+        model, data = self._damped_model(D)
         q, v = np.array(q, float), np.array(v, float)  # copies: dW_times holds q
         B, nq, nv, nu, h = len(q), self.nq, self.nv, self.nu, self.h
         tau = np.asarray(u, float) @ self.B_act.T
+        if D is not None:
+            tau = tau - D * v  # the damping force at the step's end: h D v+ moved into M
         W = np.empty((B, nv, nv))
         a = np.empty((B, nv))
         J = np.empty((B, 6, nv))
@@ -307,6 +327,8 @@ class PinocchioContactModel(ContactModelBase):
         dv_free = np.zeros((B, nv, P))
         dv_free[:, :, :nq] = h * da_dq
         dv_free[:, :, nq : nq + nv] = np.eye(nv) + h * da_dv
+        if D is not None:  # tau - D v depends on v
+            dv_free[:, :, nq : nq + nv] -= h * W * D
         dv_free[:, :, nq + nv :] = h * W @ self.B_act
 
         fm, fd = self._free_model, self._free_data
@@ -336,15 +358,19 @@ class PinocchioContactModel(ContactModelBase):
         # (6, nv) even for nv = 1, where the binding hands back a vector
         return self._centres(), np.array(self.pin_data.J).reshape(6, self.nv), maps
 
-    def quantities_within(self, q, v, u, distance, *, derivatives=True):
+    def quantities_within(self, q, v, u, distance, *, derivatives=True, damping=None):
         """As the base class, with one kinematics pass for the distances and the quantities
         (the base class's, for a plant with affine quantities)."""
         if self.affine is not None:
-            return super().quantities_within(q, v, u, distance, derivatives=derivatives)
+            return super().quantities_within(
+                q, v, u, distance, derivatives=derivatives, damping=damping
+            )
         kinematics = self._kinematics(np.asarray(q[0], float))
         phi = kinematics[0] @ self.normal - self._radius - self.ground.height
         active = np.flatnonzero(phi <= distance)
-        quant = self.quantities(q, v, u, active, derivatives=derivatives, kinematics=kinematics)
+        quant = self.quantities(
+            q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping
+        )
         return active, quant
 
     def _contacts(self, kinematics, active, derivatives: bool, P: int = 0):

@@ -21,7 +21,7 @@ from drake_abs.contact.contact_lcp import (
     ParameterDerivatives,
     contact_step,
 )
-from drake_abs.contact.damping import implicit_damping
+from drake_abs.contact.damping import damped_parameters
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
@@ -89,6 +89,7 @@ class ComplementarityStepper:
         self.damping = joint_damping(plant) if damping else np.zeros(model.nv)
         self._clips = bool(np.isfinite(self.effort).any())  # per-step work only where needed
         self._damps = bool(self.damping.any())
+        self._damping = self.damping if self._damps else None  # passed to the provider
 
     @property
     def sizes(self) -> tuple[int, int, int, int]:
@@ -169,7 +170,7 @@ class ComplementarityStepper:
         groups = None  # (rows, active contact indices, quantities or None) per active set
         if B == 1 and pruned:  # one state: the provider shares kinematics (distances, rows)
             idx, quant = self.model.quantities_within(
-                q, v, u, self.activation_distance, derivatives=jacobians
+                q, v, u, self.activation_distance, derivatives=jacobians, damping=self._damping
             )
             active = np.zeros((1, nc), dtype=bool)
             active[0, idx] = True
@@ -226,8 +227,9 @@ class ComplementarityStepper:
 
     def _joint_rows(self, quant, par, q, lidx: np.ndarray, jacobians: bool):
         """One group's quantities with the joint-limit rows ``lidx`` appended to the contact
-        rows (frictionless; their distances do not depend on the model parameters) and the
-        joint damping applied implicitly."""
+        rows (frictionless; their distances do not depend on the model parameters), and the
+        model-parameter derivatives carried to the damped step (the provider took the joint
+        damping: ``quantities(..., damping=...)``)."""
         if lidx.size:
             P = quant.dphi.shape[-1] if jacobians else None
             phi, J, dphi, dJ = self.limits.rows(q, lidx, self.sizes[1], P)
@@ -244,9 +246,9 @@ class ComplementarityStepper:
             if par is not None:
                 zeros = np.zeros((q.shape[0], lidx.size, par.dphi.shape[-1]))
                 par = replace(par, dphi=np.concatenate([par.dphi, zeros], axis=1))
-        if not self._damps:
+        if not self._damps or par is None:  # the provider took the damping (quantities)
             return quant, par
-        return implicit_damping(quant, self.damping, self.model.h, par)
+        return quant, damped_parameters(par, quant.W, quant.v_free, self.damping, self.model.h)
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: bool) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
@@ -280,7 +282,9 @@ class ComplementarityStepper:
                 (both[both < nc], both[both >= nc] - nc) if self.limits.size else (both, both[:0])
             )
             if quant is None:
-                quant = self.model.quantities(q[rows], v[rows], u[rows], idx, derivatives=jacobians)
+                quant = self.model.quantities(
+                    q[rows], v[rows], u[rows], idx, derivatives=jacobians, damping=self._damping
+                )
             cone = self._cone(idx, lidx.size)
             par = None
             if parameters:

@@ -18,8 +18,7 @@ from drake_abs.diagrams.scene_visualization import (
     rollout_states,
 )
 from drake_abs.experiments.scene_recordings import RECORDINGS
-from drake_abs.experiments.scene_recordings import Config as RecordingConfig
-from drake_abs.experiments.scene_recordings import run as run_recordings
+from drake_abs.experiments.scene_recordings import rollout as recording_rollout
 from drake_abs.multibody.builder import PACKAGE_DIR
 from drake_abs.multibody.model_files import read_stl, stl_to_obj, visual_only_model_text
 from drake_abs.multibody.scene import Scene
@@ -160,11 +159,11 @@ def test_scene_recordings_draw_their_robot_in_headless_chromium(name, tmp_path, 
     in a region of the model's size, and the rollout behind it converged without
     penetrating."""
     _chromium()
-    summary = run_recordings(RecordingConfig(duration=0.05, recordings=(name,)), tmp_path,
-                             meshcat=meshcat)  # fmt: skip
-    row = summary["rows"][0]
-    assert row["unconverged_steps"] == 0 and row["deepest_penetration_m"] < 1e-3
-    page = tmp_path / row["html"]
+    sm, xs, unconverged = recording_rollout(name, 0.05)
+    assert (
+        unconverged == 0 and sm.contact_model.distances(xs[:, : sm.contact_model.nq]).min() > -1e-3
+    )
+    page = record_rollout_html(sm.scene, xs, tmp_path / f"{name}.html", meshcat=meshcat)
     assert page.stat().st_size > 100_000 and "http://localhost" not in page.read_text()
     meshcat.Delete("/drake/visualizer")  # the model (and its contact spheres) only
     meshcat.DeleteRecording()

@@ -203,3 +203,31 @@ def test_batched_pass_equals_the_per_state_pass(name, rng):
     assert batch.dJn.shape[-1] == model.nq and batch.dN.shape[-1] <= model.nq
     each = np.concatenate([model.distances(q[i : i + 1]) for i in range(B)])
     np.testing.assert_array_equal(model.distances(q), each)
+
+
+@pytest.mark.parametrize("name", ["gym_half_cheetah", "gym_hopper"])
+def test_damping_taken_in_the_batched_pass_equals_implicit_damping(name, rng):
+    """The batched pass takes joint damping through the armature (M + h D) and the torque
+    (tau - D v): the same W, free velocity and derivatives as implicit_damping of the undamped
+    quantities, without a second inverse-dynamics derivative."""
+    from drake_abs.contact.damping import implicit_damping
+    from drake_abs.multibody.joint_limits import joint_damping
+
+    sm = build_scene_model(name)
+    model = sm.contact_model
+    D = joint_damping(sm.plant)
+    assert D.any()
+    B = 5
+    q = sm.q0 + 0.1 * rng.standard_normal((B, model.nq))
+    v, u = rng.standard_normal((B, model.nv)), rng.standard_normal((B, model.nu))
+    for derivatives in (False, True):
+        ours = model.quantities(q, v, u, derivatives=derivatives, damping=D)
+        want = implicit_damping(model.quantities(q, v, u, derivatives=derivatives), D, model.h)[0]
+        for field in ("W", "v_free", "dv_free"):
+            x, y = getattr(ours, field), getattr(want, field)
+            if y is None:
+                continue
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-12 * (1 + np.abs(y).max()))
+    f = rng.standard_normal((B, model.nv))
+    y = want.dW_dot(f)
+    np.testing.assert_allclose(ours.dW_dot(f), y, rtol=0, atol=1e-12 * (1 + np.abs(y).max()))
