@@ -7,7 +7,8 @@ and gym_half_cheetah, which load the MJCF files unedited), same time step (the s
   1024; cost per environment), without and with the Jacobians dx+/dx, dx+/du;
 * MuJoCo: ``mj_step`` (Euler: the Hopper file's RK4 is switched off so that the same model can be
   differentiated) and ``mjd_transitionFD`` (centred differences, eps 1e-6; it returns the
-  same dx+/dx, dx+/du);
+  same dx+/dx, dx+/du; the target's reference, as the accurate one), and the same with forward
+  differences (half the evaluations, first-order accurate; printed beside it);
 * Drake SAP on the scene's twin (``make_drake_twin``): a double step (one
   ``EvalUniquePeriodicDiscreteUpdate`` of the twin without sampled outputs, from each state)
   and one AutoDiffXd step with derivatives seeded on (x, u), where Drake can.
@@ -115,6 +116,17 @@ def bench_scene(name: str, steps: int, repeats: int, batches: list[int]) -> dict
             mujoco.mjd_transitionFD(model, data, 1e-6, True, A, Bm, None, None)
 
     row["mjd_transitionFD_us"] = 1e6 * (_best_time(mj_fd, repeats) - overhead) / steps
+
+    def mj_fd_forward():
+        for x, c in zip(xs, ctrl, strict=True):
+            data.qpos[:] = x[:nq]
+            data.qvel[:] = x[nq:]
+            data.ctrl[:] = c
+            mujoco.mjd_transitionFD(model, data, 1e-6, False, A, Bm, None, None)
+
+    row["mjd_transitionFD_forward_us"] = (
+        1e6 * (_best_time(mj_fd_forward, repeats) - overhead) / steps
+    )
     row.update(bench_sap(sm, xs, torques, repeats))
     return row
 
@@ -181,7 +193,11 @@ def main() -> None:
         print(f"\n{r['scene']} (dt {r['time_step']} s; gymnasium steps {gym} s)")
         fd = r["mjd_transitionFD_us"]
         print(f"  {'':28s} {'us/step':>9s} {'/mj_step':>9s} {'/FD jac':>8s}")
-        lines = [("MuJoCo mj_step", r["mj_step_us"]), ("MuJoCo mjd_transitionFD", fd)]
+        lines = [
+            ("MuJoCo mj_step", r["mj_step_us"]),
+            ("MuJoCo mjd_transitionFD", fd),
+            ("MuJoCo FD, forward (1st order)", r["mjd_transitionFD_forward_us"]),
+        ]
         for B in args.batches:
             lines.append((f"ours B={B} step", r[f"ours_B{B}_us"]))
             lines.append((f"ours B={B} step+Jacobian", r[f"ours_B{B}_jac_us"]))
