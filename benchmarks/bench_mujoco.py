@@ -108,25 +108,15 @@ def bench_scene(name: str, steps: int, repeats: int, batches: list[int]) -> dict
     A = np.zeros((2 * nv + model.na, 2 * nv + model.na))
     Bm = np.zeros((2 * nv + model.na, model.nu))
 
-    def mj_fd():
+    def mj_fd(centred: bool):
         for x, c in zip(xs, ctrl, strict=True):
             data.qpos[:] = x[:nq]
             data.qvel[:] = x[nq:]
             data.ctrl[:] = c
-            mujoco.mjd_transitionFD(model, data, 1e-6, True, A, Bm, None, None)
+            mujoco.mjd_transitionFD(model, data, 1e-6, centred, A, Bm, None, None)
 
-    row["mjd_transitionFD_us"] = 1e6 * (_best_time(mj_fd, repeats) - overhead) / steps
-
-    def mj_fd_forward():
-        for x, c in zip(xs, ctrl, strict=True):
-            data.qpos[:] = x[:nq]
-            data.qvel[:] = x[nq:]
-            data.ctrl[:] = c
-            mujoco.mjd_transitionFD(model, data, 1e-6, False, A, Bm, None, None)
-
-    row["mjd_transitionFD_forward_us"] = (
-        1e6 * (_best_time(mj_fd_forward, repeats) - overhead) / steps
-    )
+    for key, centred in (("mjd_transitionFD_us", True), ("mjd_transitionFD_forward_us", False)):
+        row[key] = 1e6 * (_best_time(lambda c=centred: mj_fd(c), repeats) - overhead) / steps
     row.update(bench_sap(sm, xs, torques, repeats))
     return row
 
