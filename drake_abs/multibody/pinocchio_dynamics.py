@@ -202,10 +202,6 @@ class PinocchioContactModel(ContactModelBase):
             self._rank[i, : len(rank)] = rank
         self._radius = np.array([c.radius for c in self.contacts], dtype=float)
         joints = sorted({jid for jid, _ in self._points})
-        self._by_joint = []  # (joint id, its contacts' indices, their points in its frame)
-        for jid in joints:
-            idx = np.array([i for i, (j, _) in enumerate(self._points) if j == jid])
-            self._by_joint.append((jid, idx, np.array([self._points[i][1] for i in idx])))
         self._has_friction = np.array([c.friction is not None for c in self.contacts])
         #: the joints that carry contacts, and each contact's slot among them
         self._carriers = [int(j) for j in joints]
@@ -215,20 +211,6 @@ class PinocchioContactModel(ContactModelBase):
     def _pin_q(self, q: np.ndarray) -> np.ndarray:
         """Pinocchio's configuration at Drake's q (the same vector without free joints)."""
         return q if self._coords is None else self._coords.at(q).q_pin
-
-    def _centres(self) -> np.ndarray:
-        """World positions (nc, 3) of every contact centre after the last forward kinematics:
-        one placement read per joint that carries contacts."""
-        data = self.pin_data
-        if len(self._by_joint) == 1:  # every contact on one body (a box, a ball)
-            jid, _, p_J = self._by_joint[0]
-            X = data.oMi[jid]
-            return p_J @ X.rotation.T + X.translation
-        out = np.empty((len(self.contacts), 3))
-        for jid, idx, p_J in self._by_joint:
-            X = data.oMi[jid]
-            out[idx] = p_J @ X.rotation.T + X.translation
-        return out
 
     def _read_placements(self, H: np.ndarray, b: int) -> None:
         """Copy the placements (4 x 4) of the joints that carry contacts, after the last forward
@@ -255,16 +237,15 @@ class PinocchioContactModel(ContactModelBase):
     def quantities(
         self, q, v, u, active=None, *, derivatives=True, kinematics=None, damping=None
     ) -> StepQuantities:
-        """As the base class; a batch of several states without quaternion floating joints is
-        evaluated in one pass: one pinocchio call per state (``computeABADerivatives``, which
+        """As the base class; a batch without quaternion floating joints (any B) is evaluated in
+        one pass: one pinocchio call per state (``computeABADerivatives``, which
         also places the joints and fills their Jacobians; or ``computeJointJacobians``, ``aba``
         and ``computeMinverse`` without derivatives), then every contact row of the batch in
         one compiled kernel (:func:`_contact_rows_batch`). Joint damping is then taken in the
         same call: the model's armature plus ``h D`` gives ``M + h D`` and the torque ``tau - D
         v``, so ``W = (M + h D)^-1`` and the damped free velocity come out of the one ABA
         (equal to :func:`~drake_abs.contact.damping.implicit_damping` of the undamped ones)."""
-        batch = self._coords is None and kinematics is None and self.affine is None
-        if not batch or len(q) < 2:
+        if self._coords is not None or self.affine is not None:
             return super().quantities(
                 q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping
             )
@@ -356,12 +337,14 @@ class PinocchioContactModel(ContactModelBase):
         maps = None if self._coords is None else self._coords.at(q)
         pin.computeJointJacobians(self.pin_model, self.pin_data, q if maps is None else maps.q_pin)
         # (6, nv) even for nv = 1, where the binding hands back a vector
-        return self._centres(), np.array(self.pin_data.J).reshape(6, self.nv), maps
+        H = np.empty((1, len(self._carriers), 4, 4))
+        self._read_placements(H, 0)
+        return self._batch_centres(H)[0], np.array(self.pin_data.J).reshape(6, self.nv), maps
 
     def quantities_within(self, q, v, u, distance, *, derivatives=True, damping=None):
-        """As the base class, with one kinematics pass for the distances and the quantities
-        (the base class's, for a plant with affine quantities)."""
-        if self.affine is not None:
+        """As the base class; with quaternion floating joints, one kinematics pass serves the
+        distances and the quantities."""
+        if self.affine is not None or self._coords is None:  # distances, then the batched pass
             return super().quantities_within(
                 q, v, u, distance, derivatives=derivatives, damping=damping
             )
@@ -401,46 +384,16 @@ class PinocchioContactModel(ContactModelBase):
 
     def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         q = np.asarray(q, float)
-        if kinematics is None:
-            kinematics = self._kinematics(q)
-        if kinematics[2] is not None:
-            return self._one_free(q, v, u, active, derivatives, kinematics)
-        model, data = self.pin_model, self.pin_data
-        nq, nv, nu = self.nq, self.nv, self.nu
-        h = self.h
-        v = np.asarray(v, float)
-        tau = self.B_act @ np.asarray(u, float)
-        if not derivatives:
-            a = pin.aba(model, data, q, v, tau)
-            W = pin.computeMinverse(model, data, q)  # upper triangle
-            W[self._lower] = W.T[self._lower]
-            out = self._contacts(kinematics, active, False)
-            return dict(W=W, v_free=v + h * a, N=self._eye, **out)
-        da_dq, da_dv, W = pin.computeABADerivatives(model, data, q, v, tau)
-        W = W.copy()  # data.Minv, upper triangle
-        W[self._lower] = W.T[self._lower]
-        a = data.ddq.copy()
-        P = nq + nv + nu
-        dv_free = np.zeros((nv, P))
-        dv_free[:, :nq] = h * da_dq
-        dv_free[:, nq : nq + nv] = np.eye(nv) + h * da_dv
-        dv_free[:, nq + nv :] = h * W @ self.B_act
-        fm, fd = self._free_model, self._free_data
-        zero = np.zeros(nv)
-        q = q.copy()  # held by dW_times, evaluated after the LCP solve
-
-        def dW_times(f: np.ndarray) -> np.ndarray:  # (nv,) -> (nv, P): d(W f) = -W dM (W f)
-            dW_f = np.zeros((nv, P))
-            dM_a = pin.computeRNEADerivatives(fm, fd, q, zero, W @ f)[0]  # at zero v, gravity
-            dW_f[:, :nq] = -W @ dM_a
-            return dW_f
-
-        c = self._contacts(kinematics, active, True)  # narrow: the q columns (nq = nv here)
-        return dict(
-            W=W, v_free=v + h * a, N=self._eye, phi=c["phi"], Jn=c["Jn"], Jt=c["Jt"],
-            dW_times=dW_times, dv_free=dv_free, dphi=c["dphi"], dJn=c["dJn"], dJt=c["dJt"],
-            dN=np.zeros((nq, nv, 0)),
-        )  # fmt: skip
+        if self._coords is not None:
+            return self._one_free(q, v, u, active, derivatives, kinematics or self._kinematics(q))
+        # revolute, prismatic and weld joints: the batched pass, for one state
+        v, u = np.asarray(v, float)[None], np.asarray(u, float)[None]
+        quant = self._batch_quantities(q[None], v, u, active, derivatives, None)
+        out = {k: getattr(quant, k)[0] for k in ("W", "v_free", "N", "phi", "Jn", "Jt")}
+        if derivatives:
+            out.update({k: getattr(quant, k)[0] for k in ("dv_free", "dphi", "dJn", "dJt", "dN")})
+            out["dW_times"] = lambda f: quant.dW_times(np.asarray(f, float)[None])[0]
+        return out
 
     def _one_free(self, q, v, u, active, derivatives: bool, kinematics) -> dict:
         """:meth:`_one` for a plant with quaternion floating joints: pinocchio evaluated at
@@ -504,10 +457,11 @@ def _contact_rows_batch(
     centres, active, radius, n, height, tangents, friction, J, paths, ranks, derivatives, width
 ):  # fmt: skip
     """Rows of the active contacts (indices ``active``, na of them) for B states: ``phi`` (B,
-    na), ``Jn`` (B, na, nv), ``Jt`` (B, nt, nv) and, with ``derivatives``, ``dphi`` (B, na, nv),
-    ``dJn`` (B, na, nv, nv), ``dJt`` (B, nt, nv, nv), in pinocchio's velocities, derivatives
-    with respect to its tangent increments (Drake's q and v for 1-dof joints). The derivative
-    arrays have ``width`` >= nv columns (e.g. P = nq + nv + nu), zero past the first nv.
+    na), ``Jn`` (B, na, nv), ``Jt`` (B, nt, nv) and, with ``derivatives``, ``dphi`` (B, na,
+    width), ``dJn`` (B, na, nv, width), ``dJt`` (B, nt, nv, width), in pinocchio's velocities,
+    derivatives with respect to its tangent increments (Drake's q and v for 1-dof joints):
+    ``width`` >= nv columns, zero past the first nv (the batched pass asks for nq = nv, the q
+    columns of a model with qdot = v).
 
     Per state: centres (B, nc, 3) every candidate's centre in the world (the witness point is
     ``Q = C - radius n``) and J (B, 6, nv) the world-frame joint Jacobians (linear rows first)
