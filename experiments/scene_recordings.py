@@ -147,6 +147,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Roll every recording out and, with ``out``, write its HTML page there (drawn in a new
     Meshcat bound to localhost)."""
     config = config or Config()
+    if not (np.isfinite(config.duration) and config.duration > 0):
+        raise ValueError(
+            f"duration must be a finite number of seconds > 0; got {config.duration!r}"
+        )
+    if not np.isfinite(config.push_offset):
+        raise ValueError(f"push_offset must be a finite distance in m; got {config.push_offset!r}")
     unknown = set(config.recordings) - set(RECORDINGS)
     if unknown:
         raise ValueError(f"recordings must be among {sorted(RECORDINGS)}; got {sorted(unknown)}")

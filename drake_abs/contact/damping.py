@@ -23,7 +23,9 @@ import numpy as np
 from drake_abs.contact.contact_lcp import ParameterDerivatives, StepQuantities
 
 
-def _check(damping: np.ndarray, nv: int, h: float) -> np.ndarray:
+def check_damping(damping: np.ndarray, nv: int, h: float) -> np.ndarray:
+    """``damping`` as nv finite numbers >= 0 (N m s / rad or N s / m per velocity); raises a
+    ValueError naming the argument otherwise (and for a time step h that is not > 0)."""
     damping = np.asarray(damping, dtype=float)
     if damping.shape != (nv,) or not np.all(np.isfinite(damping)) or np.any(damping < 0):
         raise ValueError(
@@ -45,7 +47,7 @@ def implicit_damping(
     entry is 0."""
     W = np.asarray(quant.W, dtype=float)
     B, nv = quant.v_free.shape
-    D = _check(damping, nv, h)
+    D = check_damping(damping, nv, h)
     if not D.any():
         return quant, parameters
     A = np.linalg.inv(np.eye(nv) + h * W * D[None, None, :])  # (I + h W D)^-1, (B, nv, nv)

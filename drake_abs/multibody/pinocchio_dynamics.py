@@ -42,6 +42,7 @@ from pydrake.multibody.tree import (
 )
 
 from drake_abs.contact.contact_lcp import StepQuantities
+from drake_abs.contact.damping import check_damping
 from drake_abs.multibody.drake_dynamics import ContactModelBase, PointContact
 from drake_abs.multibody.pinocchio_free_joints import FreeJointCoordinates
 
@@ -250,7 +251,8 @@ class PinocchioContactModel(ContactModelBase):
                 q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping
             )
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
-        D = None if damping is None or not np.any(damping) else np.asarray(damping, float)
+        D = None if damping is None else check_damping(damping, self.nv, self.h)
+        D = D if D is not None and D.any() else None
         return self._batch_quantities(q, v, u, active, derivatives, D)
 
     def _damped_model(self, D: np.ndarray | None) -> tuple:

@@ -53,3 +53,17 @@ def test_pushed_box_follows_quasi_static_pushing():
         right["box_displacement_m"], left["box_displacement_m"] * np.array([1, -1]), atol=1e-6
     )
     assert "pusher_box" in report({"duration_s": 1.5, "rows": [left]})
+
+
+@pytest.mark.parametrize(
+    "config, match",
+    [
+        (Config(duration=0.0), "duration"),
+        (Config(duration=float("nan")), "duration"),
+        (Config(push_offset=float("inf")), "push_offset"),
+        (Config(recordings=("hopper_x",)), "recordings"),
+    ],
+)
+def test_bad_configs_are_refused_by_name(config, match):
+    with pytest.raises(ValueError, match=match):
+        run(config)

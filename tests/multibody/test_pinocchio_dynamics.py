@@ -231,3 +231,12 @@ def test_damping_taken_in_the_batched_pass_equals_implicit_damping(name, rng):
     f = rng.standard_normal((B, model.nv))
     y = want.dW_dot(f)
     np.testing.assert_allclose(ours.dW_dot(f), y, rtol=0, atol=1e-12 * (1 + np.abs(y).max()))
+
+
+def test_bad_damping_is_refused_by_name():
+    sm = build_scene_model("gym_hopper")
+    model = sm.contact_model
+    q, v, u = sm.q0[None].repeat(2, 0), np.zeros((2, model.nv)), np.zeros((2, model.nu))
+    for bad in (np.ones(model.nv + 1), np.full(model.nv, np.nan), -np.ones(model.nv)):
+        with pytest.raises(ValueError, match="damping"):
+            model.quantities(q, v, u, damping=bad)
