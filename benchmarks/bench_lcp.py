@@ -29,7 +29,7 @@ Sections:
    ``mu = 0``) against time per problem; (b) for the exact LCP (``mu = 0``) and each
    ``exact_tol = tol``, the achieved residual and error against Moby against time per problem.
 
-5. Problem families (issue 13): for each family and size d in (10, 16, 20, 24, 32, 48, 64, 101)
+5. Problem families: for each family and size d in (10, 16, 20, 24, 32, 48, 64, 101)
    (friction: d = 12 .. 102), how many problems converge at mu = 0 with the interior point alone
    (second starts on, crossover off) and with the crossover (the default), the interior-point
    iterations and principal pivots taken, the solver's residual and an independent check of each
@@ -730,7 +730,7 @@ def bench_families(cfg: Config, log: WarningLog) -> dict[str, Any]:
             r = solve_lcp(F, q, 0.0, on_bad_matrix=policy)
             smooth = solve_lcp(F, q, FAMILY_SMOOTH_MU, on_bad_matrix=policy)
             check = independent_check(F, q, r.lam)
-            # the old default (before issue 13) refused every non-PSD F with d > 10 that was
+            # the old default refused every non-PSD F with d > 10 that was
             # not strictly diagonally dominant
             classes_now = np.asarray(r.matrix_class)
             old_refused = int(

@@ -1,6 +1,6 @@
-"""Benchmark of the differentiable QP-MPC (paper 003) against central finite differences.
+"""Benchmark of the differentiable QP-MPC (Zuliani et al. 2025) against central finite differences.
 
-Measured in one run, on the quadcopter MPC of paper 003 section 7 (12 states, 4 inputs,
+Measured in one run, on the quadcopter MPC of Zuliani et al. 2025, section 7 (12 states, 4 inputs,
 horizon N = 12, theta of size 94; prediction model: the hover linearisation), timed with
 ``time.perf_counter``, medians over repeats:
 
@@ -35,7 +35,7 @@ from drake_abs.mpc.qp_mpc import MpcSpec, QpMpc, riccati_terminal_cost, theta_fr
 from drake_abs.tasks import quadcopter as qc
 
 PRM = qc.QuadcopterParams()
-# the paper 003 task of drake-abs experiment mpc-quadcopter
+# the Zuliani et al. (2025) task of drake-abs experiment mpc-quadcopter
 X_REF = np.array(task.X_REF)
 Q_D = np.array(task.STAGE_Q)
 R_D = np.array(task.STAGE_R)

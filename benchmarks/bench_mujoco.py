@@ -1,4 +1,4 @@
-"""Per-step cost against MuJoCo and Drake SAP on the same models (issue 14, item 6).
+"""Per-step cost against MuJoCo and Drake SAP on the same models.
 
 Same run, same machine, one thread, on gymnasium's Hopper and HalfCheetah (the scenes gym_hopper
 and gym_half_cheetah, which load the MJCF files unedited), same time step (the scene's):

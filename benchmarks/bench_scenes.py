@@ -1,4 +1,4 @@
-"""Per-step cost of the complementarity plant against Drake's own contact models (issue 3, 6).
+"""Per-step cost of the complementarity plant against Drake's own contact models.
 
 Measured in the same run, on each shipped scene (drake_abs/scenes/*.yaml):
 

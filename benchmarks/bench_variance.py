@@ -1,5 +1,5 @@
 """Gradient-estimate variance per second of compute: FOPG-ABS against randomised smoothing (RS)
-(issue 4 section 6; paper 000 section 5, "Discussion on BS and RS").
+(Zhang et al. 2023, section 5, "Discussion on BS and RS").
 
 The task is the hopping ball of :mod:`drake_abs.experiments.gradient_variance` (2-D point mass,
 h = 0.01 s, inelastic ground, action noise sigma = 1 N, the spring policy), at one horizon.

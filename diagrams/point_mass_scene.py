@@ -1,5 +1,5 @@
 """A diagram that runs several smoothing policies on the same point-mass LCS side by side, with
-logging and (optionally) Meshcat drawing: the bouncing ball of paper 000, Figure 1a."""
+logging and (optionally) Meshcat drawing: the bouncing ball of Zhang et al. 2023, Figure 1a."""
 
 from __future__ import annotations
 

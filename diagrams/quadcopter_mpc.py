@@ -1,4 +1,5 @@
-"""The closed loop of paper 003 as one Drake diagram: quadcopter + MPC + cost, differentiable.
+"""The closed loop of Zuliani et al. (2025) as one Drake diagram: quadcopter + MPC + cost,
+differentiable.
 
 ``make_quadcopter_mpc_diagram`` connects :class:`~drake_abs.systems.quadcopter_plant.
 QuadcopterPlant` (the true, nonlinear dynamics), :class:`~drake_abs.systems.mpc_controller.
@@ -40,7 +41,8 @@ COST_FIELDS = ("tracking_cost", "violation", "total", "fallback_steps")
 @TemplateSystem.define("ClosedLoopCost_", T_list=[float, AutoDiffXd])
 def ClosedLoopCost_(T):
     class Impl(LeafSystem_[T]):
-        """Accumulates the closed-loop cost of paper 003 section 7 every ``time_step`` seconds.
+        """Accumulates the closed-loop cost of Zuliani et al. 2025, section 7 every ``time_step``
+        seconds.
 
         .. pydrake_system::
 

@@ -1,4 +1,5 @@
-"""Paper 000 section 8.3: learn the angle of a throw so that the ball ends up at a goal, with
+"""Zhang et al. 2023, section 8.3: learn the angle of a throw so that the ball ends up at a goal,
+with
 contact before the goal; learning curves of ZOPG, FOPG (exact), FOPG-BS and FOPG-ABS.
 
 The task (ours; the paper's Appendix C.2 illustration is not in the text we have): a ball of
@@ -46,7 +47,8 @@ from drake_abs.tasks.box_lcs import TranslatingBox
 
 METHODS = ("ZOPG", "FOPG", "FOPG-BS", "FOPG-ABS")
 
-#: paper 000 section 8.3, the claims this experiment sets ours beside (no numbers are given).
+#: Zhang et al. 2023, section 8.3: the claims this experiment sets ours beside (no numbers
+#: are given).
 PAPER_CLAIMS = {
     "bs_beats_zopg_and_fopg": "FOPG-BS: higher asymptotic return and faster convergence than "
     "both ZOPG and vanilla FOPG",
@@ -173,7 +175,7 @@ def smoothing_for(method: str, config: Config) -> SmoothingPolicy:
 
 def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> PolicyObjective:
     """The throw as a :class:`PolicyObjective` on the model smoothed by ``smoothing``."""
-    # frozen mu: paper 000 Algorithm 1, the method this experiment reproduces
+    # frozen mu: Zhang et al. 2023, Algorithm 1, the method this experiment reproduces
     stepper = ThrowStepper(ball(config).stepper(smoothing, "frozen"), config.speed)
     reward = QuadraticReward(
         Q=np.zeros((5, 5)), R=np.zeros((1, 1)), x_goal=np.array([config.goal, 0, 0, 0, 0]),
@@ -368,7 +370,7 @@ def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> Non
 
 def report(summary: dict) -> str:
     lines = [
-        "ball throw (paper 000 section 8.3): evaluated return -(p_x(T) - goal)^2 in m^2, "
+        "ball throw (Zhang et al. 2023, section 8.3): evaluated return -(p_x(T) - goal)^2 in m^2, "
         f"mean +- std over seeds; best on the angle grid {summary['best_return_on_grid']:.2e} "
         f"at {summary['best_angle_on_grid']:.3f} rad; start {summary['initial_return']:.3f}",
     ]

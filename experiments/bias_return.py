@@ -1,5 +1,6 @@
 """FOPG training under barrier smoothing with mu = 1e-10, mu = 1e-2 and the adaptive
-contact-aware design: return and gradient bias along training (paper 000 section 8.4, Figure 5).
+contact-aware design: return and gradient bias along training (Zhang et al. 2023, section 8.4,
+Figure 5).
 
 The paper runs this on the Dojo half-cheetah. Here the full-size run is on a cheap contact task
 of the point-mass family, and a small version runs on our planar half-cheetah scene
@@ -15,7 +16,8 @@ about a millisecond per sample in Python:
   linear feedback around the standing posture (114 parameters), zero at the start; action
   noise sigma = 0.3 N m, Adam step 0.005.
 
-Each design is trained with Adam on FOPG estimates (paper 000 eq. 4.1) from the same seeds. The
+Each design is trained with Adam on FOPG estimates (Zhang et al. 2023, eq. 4.1) from the same
+seeds. The
 rollouts of training use the design's own (softened) dynamics, as Algorithm 1 does. Measured:
 
 - the **return** of the current policy on the EXACT model (hard contact), with fixed evaluation
@@ -147,7 +149,7 @@ class Task:
             from drake_abs.experiments.gradient_variance import TIME_STEP, spring_theta
 
             lcs = point_mass_lcs(2, time_step=TIME_STEP)
-            self._stepper = lambda s: LcsStepper(lcs, s, "frozen")  # paper 000 Algorithm 1
+            self._stepper = lambda s: LcsStepper(lcs, s, "frozen")  # Zhang et al. 2023, Algorithm 1
             self.policy = LinearPolicy(4, 2)
             self.reward = QuadraticReward(
                 Q=np.diag([1.0, 1.0, 0.0, 0.0]),
@@ -396,7 +398,7 @@ def _plot(name: str, result: dict, path: Path) -> Path:
         title="(b) Gradient bias (triangles: unresolved, below 2 noise)",
     )  # fmt: skip
     ax[0].legend(fontsize=8)
-    fig.suptitle("Paper 000 Figure 5: barrier smoothing designs for FOPG")
+    fig.suptitle("Zhang et al. 2023, Figure 5: barrier smoothing designs for FOPG")
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
@@ -408,7 +410,7 @@ def _fmt(x) -> str:
 
 
 def report(summary: dict) -> str:
-    lines = [f"FOPG with BS / ABS (paper 000 Figure 5); {summary['seconds']:.0f} s"]
+    lines = [f"FOPG with BS / ABS (Zhang et al. 2023, Figure 5); {summary['seconds']:.0f} s"]
     for task, result in summary["tasks"].items():
         lines.append(f"task {task} ({result['seconds']:.0f} s):")
         for design, d in result["designs"].items():

@@ -1,10 +1,10 @@
-"""The bouncing ball of paper 000 (Figure 1a, Figure 2), exact and smoothed.
+"""The bouncing ball of Zhang et al. (2023) (Figure 1a, Figure 2), exact and smoothed.
 
 A ball is thrown horizontally and hits the ground. The same LCS is run under hard contact (Exact),
 barrier smoothing (BS, fixed mu) at a few mu, and adaptive barrier smoothing (ABS: contact-aware
 and Gaussian-matched), side by side in one Drake diagram. Written to the results folder:
 
-- ``vy_vs_x.png``: vertical velocity against horizontal position (paper 000 Figure 2a);
+- ``vy_vs_x.png``: vertical velocity against horizontal position (Zhang et al. 2023, Figure 2a);
 - ``dvy_dx.png``: its derivative along the trajectory (Figure 2b; -g / v_x away from contact, an
   impulse at contact for Exact, a bump of finite height when smoothed);
 - ``step_jacobian.png``: the implicit one-step Jacobian d v_y+ / d y (the stiffness ABS targets);
@@ -215,7 +215,7 @@ def _line_plot(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], axe
 
 def report(summary: dict) -> str:
     """The numbers to look at, one line per case."""
-    lines = ["bouncing ball (paper 000, Figure 2): exact, BS and ABS side by side"]
+    lines = ["bouncing ball (Zhang et al. 2023, Figure 2): exact, BS and ABS side by side"]
     for name, case in summary["cases"].items():
         lines.append(
             f"  {name:20s} min height {case['min_height_m']:+.4f} m, "

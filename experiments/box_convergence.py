@@ -1,4 +1,4 @@
-"""Convergence of the frictional contact solver on the box (issue 3, section 2).
+"""Convergence of the frictional contact solver on the box.
 
 The linearised-cone LCP is not monotone (copositive, not P). This sweep measures how the
 interior point fares on the planar box over friction coefficients 0 to 2, mass ratios 1e-3 to

@@ -74,7 +74,7 @@ def _record(scene_arg: str, steps: int, out: str | None) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="drake-abs", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="the bouncing-ball demo (paper 000, Figure 2)")
+    demo = sub.add_parser("demo", help="the bouncing-ball demo (Zhang et al. 2023, Figure 2)")
     demo.add_argument("--out", default="results/demo", help="results folder (default: %(default)s)")
     demo.add_argument("--duration", type=float, default=None, help="simulated seconds")
     demo.add_argument("--no-meshcat", action="store_true", help="skip the Meshcat HTML recording")

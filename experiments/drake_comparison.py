@@ -1,4 +1,4 @@
-"""Drake's own contact solvers beside the complementarity plant (issue 3, section 4).
+"""Drake's own contact solvers beside the complementarity plant.
 
 The same two scenes are built twice: as a discrete Drake MultibodyPlant (compliant point contact
 against a thin box welded to the world as the ground) under each of Drake's discrete contact

@@ -1,7 +1,9 @@
-"""FOPG gradient variance against unroll length (paper 000 section 8.2, Figure 3), with the bias
-beside it (issue 4 section 4).
+"""FOPG gradient variance against unroll length (Zhang et al. 2023, section 8.2, Figure 3), with
+the bias
+beside it.
 
-The task, "the hopping ball": the 2-D point mass of paper 000 Figure 1a (:func:`point_mass_lcs`,
+The task, "the hopping ball": the 2-D point mass of Zhang et al. 2023, Figure 1a
+(:func:`point_mass_lcs`,
 h = 0.01 s, 1 kg, inelastic hard contact with the ground) under a linear policy that is a
 vertical spring ``u_y = -k_s (p_y - y_eq)`` (k_s = 100 N/m, y_eq = 0.1 m) plus Gaussian action
 noise ``sigma xi_t`` (sigma = 1 N on both axes). Dropped from 0.3 m, moving sideways at 0.5 m/s,
@@ -250,7 +252,7 @@ def _plot_variance(curves: dict, path: Path) -> Path:
         xlabel="unroll length H (steps of 0.01 s)",
         ylabel="FOPG gradient variance E||g - Eg||^2",
         yscale="log",
-        title="Hopping ball: FOPG variance against horizon (paper 000 Fig. 3)",
+        title="Hopping ball: FOPG variance against horizon (Zhang et al. 2023, Fig. 3)",
     )
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -291,7 +293,7 @@ def _plot_bias(curves: dict, path: Path) -> Path:
 
 def report(summary: dict) -> str:
     lines = [
-        "FOPG gradient variance against horizon, hopping ball (paper 000 Figure 3); "
+        "FOPG gradient variance against horizon, hopping ball (Zhang et al. 2023, Figure 3); "
         f"{summary['seconds']:.0f} s, unconverged steps {summary['unconverged_steps']}",
         f"{'policy':34s} {'v at H=' + str(summary['config']['horizons'][-1]):>12s} "
         f"{'rate/step':>10s} {'power':>7s}  {'better fit':11s} {'bias at H':>10s} "

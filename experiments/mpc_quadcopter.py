@@ -1,4 +1,5 @@
-"""Gray-box tuning of a QP-MPC on the 12-state quadcopter (paper 003 section 7, Figures 1-2).
+"""Gray-box tuning of a QP-MPC on the 12-state quadcopter (Zuliani et al. 2025, section 7, Figures
+1-2).
 
 1. System identification: 100 closed-loop trajectories near the target under a stabilising MPC
    (built on the exact hover linearisation; the policy itself never uses it), inputs perturbed
@@ -493,7 +494,7 @@ def _figure1(methods: dict, reference: dict | None, path: Path) -> None:
     ax[1].set_yscale("symlog", linthresh=1e-3)
     ax[1].set_ylim(bottom=0.0)
     ax[0].legend(fontsize=8)
-    fig.suptitle("Paper 003 Figure 1 analogue: quadcopter, gray-box tuning")
+    fig.suptitle("Zuliani et al. 2025, Figure 1 analogue: quadcopter, gray-box tuning")
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
@@ -521,7 +522,8 @@ def _figure2(
     for a in ax:
         a.legend(fontsize=7, ncol=2)
     fig.suptitle(
-        "Paper 003 Figure 2 analogue: trained (solid) vs optimised with the exact model (dash-dot)"
+        "Zuliani et al. 2025, Figure 2 analogue: trained (solid) vs optimised with the exact "
+        "model (dash-dot)"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=130)
@@ -530,7 +532,7 @@ def _figure2(
 
 def report(summary: dict) -> str:
     """A text summary: per-method results and the comparison with the paper."""
-    lines = ["MPC quadcopter (paper 003): gray-box tuning of the QP-MPC cost"]
+    lines = ["MPC quadcopter (Zuliani et al. 2025): gray-box tuning of the QP-MPC cost"]
     s = summary["sysid"]
     lines.append(
         f"  system identification: {s['transitions']} transitions, rank {s['rank']}, one-step "

@@ -1,4 +1,4 @@
-"""Side by side with MuJoCo (issue 14, item 5): gymnasium's Hopper and HalfCheetah, the same MJCF
+"""Side by side with MuJoCo: gymnasium's Hopper and HalfCheetah, the same MJCF
 files loaded unedited by both, stepped with the same time step from the same state with the same
 joint torques, and Drake's SAP on the scene's twin beside them.
 

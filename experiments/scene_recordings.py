@@ -1,5 +1,5 @@
-"""Meshcat recordings of the robot and manipulation scenes under their controllers (issue 14,
-item 4): one self-contained HTML page per recording, and what each rollout did.
+"""Meshcat recordings of the robot and manipulation scenes under their controllers: one
+self-contained HTML page per recording, and what each rollout did.
 
 Recordings (each stepped by the scene's own stepper, exact contact unless the scene says
 otherwise; every step's ``converged`` flag counted):

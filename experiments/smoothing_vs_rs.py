@@ -1,4 +1,5 @@
-"""Paper 000 Figure 6: barrier smoothing (BS) against randomised smoothing (RS) on impact contact
+"""Zhang et al. 2023, Figure 6: barrier smoothing (BS) against randomised smoothing (RS) on impact
+contact
 (a dropped ball) and on frictional contact (a pushed box).
 
 (a) Impact. A ball (:func:`~drake_abs.tasks.point_mass.point_mass_lcs`, 1-D, 1 kg, h = 0.01 s)
@@ -10,7 +11,8 @@ elsewhere. Compared over a grid of y0:
 
 - GT: the exact model's derivative (the rollout Jacobian, which resolves the ramp).
 - BS: the derivative of the model smoothed by ``Fixed(mu)``, several mu (larger is smoother).
-- RS, first-order ("bundled", what paper 000 and Suh et al. 2022 call randomised smoothing):
+- RS, first-order ("bundled", what Zhang et al. (2023) and Suh et al. 2022 call randomised
+smoothing):
   ``(1/N) sum_i f'(y0 + w_i)`` with ``w ~ N(0, sigma^2)`` and f' the exact derivative, several N.
   Its expectation is the Gaussian-smoothed GT, but with few samples it mostly misses the ramp:
   the typical estimate is the constant 0, i.e. an empirical bias.

@@ -45,7 +45,8 @@ def LcsPlant_(T):
             time_step: update period in seconds (the h the LCS was built with).
             smoothing: per-contact mu policy (default Exact); larger mu is smoother.
             gradient: ``"total"`` (default: AutoDiffXd gives the derivative of the simulation)
-                or ``"frozen"`` (paper 000 Algorithm 1; biased where mu depends on the state).
+                or ``"frozen"`` (Zhang et al. 2023, Algorithm 1; biased where mu depends on the
+                state).
             on_unconverged: under AutoDiffXd, the derivatives of a step whose solve did not
                 converge: ``"drop"`` (default: NaN, with a warning), ``"flag"`` (kept, with a
                 warning) or ``"raise"`` (:mod:`drake_abs.contact.unconverged`).

@@ -1,4 +1,4 @@
-"""The differentiable QP-MPC policy (paper 003 eq. 4) as a Drake system.
+"""The differentiable QP-MPC policy (Zuliani et al. 2025, eq. 4) as a Drake system.
 
 Every evaluation calls :meth:`drake_abs.mpc.qp_mpc.QpMpc.solve`, the same code the core closed loop
 runs. Under AutoDiffXd the QP is solved in double and the KKT Jacobians du0/dx and du0/dtheta

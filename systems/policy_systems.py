@@ -1,6 +1,6 @@
 """Policies, exploration noise and reward accumulation as Drake systems (double and AutoDiffXd),
 so that a plant + policy + reward diagram differentiates as a whole with respect to the policy
-parameters (issue 4; paper 000 eq. 4.1).
+parameters (Zhang et al. 2023, eq. 4.1).
 
 Every system computes in double with the core's code (:mod:`drake_abs.policy.policies`,
 :mod:`drake_abs.policy.rewards`) and, under AutoDiffXd, chains the core's Jacobians onto the

@@ -1,4 +1,4 @@
-"""The 12-state quadcopter (paper 003 section 7) as a Drake discrete-time system.
+"""The 12-state quadcopter (Zuliani et al. 2025, section 7) as a Drake discrete-time system.
 
 Every step calls :func:`drake_abs.tasks.quadcopter.step`, the same code the core runs. Under
 AutoDiffXd the step is taken in double and its analytic Jacobians are chained onto the incoming

@@ -1,5 +1,6 @@
-"""Rigid bodies with contact, time-stepping, as a mu-softened LCP (docs/math.md section 6; paper 000
-eq. 2.2, paper 001 eqs. 1.3-1.5), with the full step Jacobian.
+"""Rigid bodies with contact, time-stepping, as a mu-softened LCP (docs/math.md section 6; Zhang et
+al. 2023,
+eq. 2.2, Zhang et al. (model-based FOPG), eqs. 1.3-1.5), with the full step Jacobian.
 
 For one step of length h, with inverse mass matrix W = M(q)^-1, the velocity without contact
 ``v_free = v + h W (tau(u) - n(q, v))``, normal Jacobians J_n (nc, nv), tangent Jacobians J_t

@@ -28,7 +28,7 @@ from drake_abs.lcp.ipm import (
 from drake_abs.lcp.matrix_class import MatrixClass
 
 #: How a step differentiates a state-dependent mu: ``"total"`` (the default everywhere: the true
-#: derivative of the step) or ``"frozen"`` (mu held constant, paper 000 Algorithm 1; biased
+#: derivative of the step) or ``"frozen"`` (mu held constant, Zhang et al. 2023, Algorithm 1; biased
 #: where mu varies with the state, exact for Exact and Fixed smoothing).
 GradientMode = Literal["frozen", "total"]
 
@@ -139,7 +139,7 @@ class LCS:
             u: (du,) or (B, du) inputs (one input broadcasts over the batch).
             smoothing: the per-contact mu policy (default :class:`Exact`); larger mu is smoother.
             gradient: ``"total"`` (default) also differentiates mu(z) through z: the derivative
-                of the step as computed. ``"frozen"`` treats mu as a constant (paper 000
+                of the step as computed. ``"frozen"`` treats mu as a constant (Zhang et al. 2023,
                 Algorithm 1): biased wherever mu depends on the state.
             jacobians: compute dx+/dx, dx+/du and the impulse (lam) and mu Jacobians.
             strict: raise instead of warning when the LCP solve does not converge.

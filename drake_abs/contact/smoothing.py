@@ -1,4 +1,4 @@
-"""Smoothing policies: how much to soften each contact (docs/math.md section 5; paper 000
+"""Smoothing policies: how much to soften each contact (docs/math.md section 5; Zhang et al. 2023,
 section 5).
 
 A policy maps a batch of contact distances ``z`` (B, d) (the distances before any impulse acts,
@@ -12,11 +12,12 @@ dynamics are less stiff); ``mu = 0`` is hard contact.
 - :class:`ContactAware`: adaptive barrier smoothing (ABS), ``mu = g(dist)`` with ``dist`` the
   distance of the nearest *inactive* contact (``z_i > 0``) and g non-increasing.
 - :class:`GaussianMatched`: per-contact ABS whose softened solution equals the Gaussian-smoothed
-  exact solution (paper 000 Prop. 5.3 / paper 001 Prop. 4.2, corrected as in docs/math.md
+  exact solution (Zhang et al. (2023) Prop. 5.3 / Zhang et al. (model-based FOPG) Prop. 4.2,
+  corrected as in docs/math.md
   section 5b).
 
 Each policy also gives ``dmu_dz`` (B, d, d) for the ``total`` gradient mode; the ``frozen`` mode
-(paper 000 Algorithm 1) treats mu as a constant.
+(Zhang et al. 2023, Algorithm 1) treats mu as a constant.
 
 **Units and the time step.** In a contact problem a normal row reads ``gamma * s = mu`` with
 ``gamma`` the normal impulse of the step (N s) and ``s`` the gap after it (m), so mu is in
@@ -131,7 +132,8 @@ def exponential_decay(mu_min: float, mu_max: float, length: float) -> Callable:
 
 @dataclass(frozen=True)
 class ContactAware(SmoothingPolicy):
-    """Adaptive barrier smoothing (ABS), contact-aware (paper 000 section 5.1, Algorithm 1).
+    """Adaptive barrier smoothing (ABS), contact-aware (Zhang et al. 2023, section 5.1, Algorithm
+    1).
 
     ``mu = g(dist)`` for every contact of a problem, where ``dist = min {z_i : z_i > 0}`` is the
     distance of the nearest inactive contact and ``g`` is non-increasing:

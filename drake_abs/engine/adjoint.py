@@ -1,5 +1,6 @@
-"""The reverse (adjoint) pass over a stored trajectory (docs/math.md section 7; paper 000 eq. 4.1,
-paper 003 eq. 8 in reverse mode).
+"""The reverse (adjoint) pass over a stored trajectory (docs/math.md section 7; Zhang et al. 2023,
+eq. 4.1,
+Zuliani et al. 2025, eq. 8 in reverse mode).
 
 For K objectives at once (K = 1 for a return, K = nx for the Jacobian of the final state), with
 ``g_x(t)`` (M, K, nx) the adjoint of x_t and the step Jacobians F_x, F_u, F_theta of step t:

@@ -1,6 +1,6 @@
 """The closed-loop engine: M rollouts of ``x_{t+1} = f(x_t, pi(x_t; theta) + sigma xi_t)`` through
 any batched stepper, their returns, and their gradients by one reverse pass (docs/math.md
-section 7; paper 000 eq. 4.1; paper 003 eq. 8).
+section 7; Zhang et al. 2023, eq. 4.1; Zuliani et al. 2025, eq. 8).
 
 Every closed loop in drake-abs runs here: the policy-gradient estimators (a policy and a task
 reward), the MPC's gray-box tuning (the MPC as a policy, its tracking cost as a negative reward),

@@ -2,7 +2,8 @@
 
 - :class:`LinearStepper`: ``x+ = A x + B u``, for tests, LQR checks and identified models.
 - :class:`ModelJacobians`: another stepper's next state with a linear model's Jacobians: the
-  model-based gradient of gray-box tuning (paper 003 eq. 8a with J_g = (A, B)), where the true
+  model-based gradient of gray-box tuning (Zuliani et al. 2025, eq. 8a with J_g = (A, B)), where
+  the true
   system is only simulated and its derivatives come from the identified model.
 """
 
@@ -58,7 +59,8 @@ class LinearStepper:
 @dataclass(frozen=True)
 class ModelJacobians:
     """The next state of ``stepper`` (the true system, simulated without derivatives) with the
-    Jacobians of the linear model (A, B): gray-box tuning's model-based gradient (paper 003
+    Jacobians of the linear model (A, B): gray-box tuning's model-based gradient (Zuliani et al.
+    2025,
     section 4.2). Everything but the Jacobians is ``stepper``'s own step."""
 
     stepper: Stepper

@@ -1,4 +1,5 @@
-"""Batched primal-dual interior point for the mu-softened LCP (docs/math.md section 3; paper 000,
+"""Batched primal-dual interior point for the mu-softened LCP (docs/math.md section 3; Zhang et al.
+2023,
 Appendix B, Algorithm 3).
 
 Solves, for every problem b of a batch and every contact i,

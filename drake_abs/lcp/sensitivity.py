@@ -1,5 +1,5 @@
 """Implicit-function-theorem Jacobians of the softened LCP solution (docs/math.md section 4;
-paper 000, Theorem A.3).
+Zhang et al. 2023, Theorem A.3).
 
 At a solution, ``G(lam; q, F, mu) = lam o (q + F lam) - mu = 0`` with
 ``K = dG/dlam = diag(s) + diag(lam) F``. Because ``K = diag(lam) (F + diag(s / lam))``,

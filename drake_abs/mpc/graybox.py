@@ -1,4 +1,5 @@
-"""Closed-loop cost of an MPC policy and its gray-box policy optimisation (paper 003 eqs. 5-10).
+"""Closed-loop cost of an MPC policy and its gray-box policy optimisation (Zuliani et al. 2025,
+eqs. 5-10).
 
 Closed loop (eq. 2): x_{t+1} = f(x_t, u_t), u_t = MPC(x_t, theta), t = 0..T-1, from a given x_0.
 Cost (eq. 7, section 7)::
@@ -57,7 +58,7 @@ GradientSource = Literal["model", "exact"]
 
 @dataclass(frozen=True)
 class TrackingCost:
-    """The upper-level cost of paper 003 section 7 and its constraint penalty.
+    """The upper-level cost of Zuliani et al. 2025, section 7 and its constraint penalty.
 
     Attributes:
         Q: (nx, nx), R: (nu, nu) stage weights; P: (nx, nx) terminal weight (Qc, Rc, Pc above).

@@ -1,5 +1,5 @@
 """The QP-MPC as a policy of the closed-loop engine: ``u = MPC(x; theta)``, the first input of the
-plan, with theta the cost parameters (paper 003 eq. 2 and 8b).
+plan, with theta the cost parameters (Zuliani et al. 2025, eq. 2 and 8b).
 
 :class:`MpcPolicy` follows :class:`drake_abs.engine.PullbackPolicy`: one QP solve per state gives
 the input and, when the engine differentiates, the KKT Jacobians du0/dx (nu, nx) and

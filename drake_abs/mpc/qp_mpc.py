@@ -1,4 +1,5 @@
-"""Differentiable QP-MPC (paper 003 eq. 4, docs/math.md section 9): OSQP solve and KKT Jacobians.
+"""Differentiable QP-MPC (Zuliani et al. 2025, eq. 4, docs/math.md section 9): OSQP solve and KKT
+Jacobians.
 
 The problem, in deviations dx = x - x_ref, du = u - u_ref from the reference (an equilibrium of
 the linear prediction model dx+ = A dx + B du), with horizon N::
@@ -29,7 +30,8 @@ to its nearest finite input bound, 9.4 rad/s for the quadcopter, or 1 without bo
 solves min 1/2 z'Hz + h'z s.t. l <= Gz <= u with H = 2 blkdiag(S R S.., Q.., P, rho_q I),
 warm-started from the previous solve and polished.
 
-Jacobians (the solution's conservative Jacobian, paper 003 Appendix A / Theorem 10): at the
+Jacobians (the solution's conservative Jacobian, Zuliani et al. 2025, Appendix A / Theorem 10): at
+the
 active set the KKT conditions H z + h + G_a' y_a = 0, G_a z = b_a are an equality system whose
 differential gives dz. Only u_0 is needed, so we solve the adjoint (transposed) system once with
 nu right-hand sides, K W = [E'; 0], K = [[H, G_a'], [G_a, 0]], E selecting w_0, and read off

@@ -1,4 +1,4 @@
-"""Least-squares identification of a linear prediction model (paper 003 section 7).
+"""Least-squares identification of a linear prediction model (Zuliani et al. 2025, section 7).
 
 From transitions (x_t, u_t, x_{t+1}) we fit, in deviations from a reference (x_ref, u_ref),
 

@@ -1,5 +1,5 @@
 """Policy-gradient estimators of ``J(theta) = E[sum_t r(x_t, u_t)]`` with
-``u_t = pi(x_t; theta) + sigma xi_t`` (docs/math.md section 7; paper 000 sections 2 and 4).
+``u_t = pi(x_t; theta) + sigma xi_t`` (docs/math.md section 7; Zhang et al. 2023, sections 2 and 4).
 
 - :func:`first_order`: FOPG, the pathwise (reparameterised) gradient, eq. 4.1: the mean of the
   per-rollout adjoint gradients.

@@ -1,4 +1,5 @@
-"""Variance and bias of policy-gradient estimators (docs/math.md section 7; paper 000 Theorem 4.2,
+"""Variance and bias of policy-gradient estimators (docs/math.md section 7; Zhang et al. 2023,
+Theorem 4.2,
 section 8.2 Figure 3 and section 8.4 Figure 5).
 
 For an estimator ``g_hat(theta)`` of ``grad J(theta)`` (one call = one estimate from a batch of
@@ -342,7 +343,7 @@ def measure_bias(stats: VarianceStats, reference: ReferenceGradient) -> BiasStat
 
 
 def fopg(samples: int) -> ObjectiveEstimator:
-    """FOPG (paper 000 eq. 4.1) with ``samples`` rollouts per estimate, as an
+    """FOPG (Zhang et al. 2023, eq. 4.1) with ``samples`` rollouts per estimate, as an
     :data:`ObjectiveEstimator`."""
     m = _check_int(samples, "samples", 1)
     return lambda obj, theta, rng: first_order(obj, theta, rng, m)

@@ -1,5 +1,5 @@
 """Deterministic policies ``u = pi(x; theta)`` batched over states, with the products the
-policy-gradient engine needs (docs/math.md section 7; paper 000 eq. 4.1).
+policy-gradient engine needs (docs/math.md section 7; Zhang et al. 2023, eq. 4.1).
 
 Exploration noise is not part of a policy: rollouts add ``sigma xi_t`` to its output
 (reparameterisation), so first-order gradients flow through the same ``pi``.

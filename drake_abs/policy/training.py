@@ -1,5 +1,5 @@
 """Policy optimisation: gradient ascent on J(theta) with Adam or SGD, a progress bar, seeds, and
-a JSON and CSV log of every iteration (paper 000 eq. 4.2).
+a JSON and CSV log of every iteration (Zhang et al. 2023, eq. 4.2).
 
 ``estimator(theta, rng) -> GradientEstimate`` is any estimator of :mod:`drake_abs.policy.estimators`
 with its sizes bound, e.g. ``lambda th, rng: first_order(obj, th, rng, 64)``.

@@ -1,5 +1,5 @@
 """A body translating in the vertical x-z plane on frictional ground, as a constant-matrix LCS:
-the box of paper 000 Figure 6b (and the ball of section 8.3 once it has landed).
+the box of Zhang et al. 2023, Figure 6b (and the ball of section 8.3 once it has landed).
 
 Without rotation the mass matrix ``M = m I`` and the contact Jacobians are constant, so the
 rigid-body time-stepping LCP of docs/math.md section 6 (:mod:`drake_abs.contact.contact_lcp`) is

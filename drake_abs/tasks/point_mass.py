@@ -1,4 +1,5 @@
-"""A point mass above flat ground as an LCS: the bouncing/thrown ball of paper 000 (Figure 1a).
+"""A point mass above flat ground as an LCS: the bouncing/thrown ball of Zhang et al. (2023)
+(Figure 1a).
 
 Semi-implicit Euler with an impulse lam (N s) along the vertical axis (docs/math.md section 6 with
 J_n = e_vertical, M = m I, no friction):

@@ -1,4 +1,5 @@
-"""The 12-state quadcopter of paper 003 (section 7), stepped by forward Euler, with its Jacobians.
+"""The 12-state quadcopter of Zuliani et al. (2025) (section 7), stepped by forward Euler, with its
+Jacobians.
 
 State x (12,), in this order and these units::
 
@@ -30,7 +31,8 @@ and 3 towards -psi. The continuous dynamics are (c = cos, s = sin, t = tan, T = 
     I_zz dr/dt  = (I_xx - I_yy) p q + tau_psi
 
 with the rotor-speed imbalance omega_r = omega_2 - omega_1 + omega_4 - omega_3 in the gyroscopic
-terms (the sign used by the model of paper 003's authors; it vanishes at hover, and with J_r =
+terms (the sign used by the model of Zuliani et al.'s (2025) authors; it vanishes at hover, and
+with J_r =
 3.4e-5 kg m^2 it is about 1e-3 of the control torques in this experiment). The discrete model is
 one forward-Euler step, x+ = x + dt f(x, u), dt = 0.1 s; its Jacobians are analytic.
 
@@ -38,7 +40,7 @@ The constants are those of the paper authors' 12-state model: m 0.468 kg, l 0.22
 k 2.98e-6 N s^2, b 1.14e-7 N m s^2, I = diag(4.856e-3, 4.856e-3, 8.801e-3) kg m^2, J_r 3.357e-5
 kg m^2, linear drag 0.25 kg/s per axis; hover at omega = sqrt(m g / (4 k)) = 620.6 rad/s.
 
-The constraints of paper 003 section 7 are in :class:`QuadcopterConstraints`.
+The constraints of Zuliani et al. 2025, section 7 are in :class:`QuadcopterConstraints`.
 """
 
 from __future__ import annotations
@@ -103,7 +105,7 @@ class QuadcopterParams:
 
 @dataclass(frozen=True)
 class QuadcopterConstraints:
-    """The state and input constraints of paper 003 section 7 (boxes).
+    """The state and input constraints of Zuliani et al. 2025, section 7 (boxes).
 
     Rotor speeds in [0, 630] rad/s; |v_x|, |v_y|, |v_z| <= 2 m/s; |phi|, |theta|, |psi| <= pi/4;
     |p|, |q|, |r| <= pi/8 rad/s; positions unconstrained.
