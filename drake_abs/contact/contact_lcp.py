@@ -269,6 +269,14 @@ class _GeneratorSmoothing(SmoothingPolicy):
         dmu = self.inner.dmu_dz(*self._contact_level(z, F))  # (B, nc, nc)
         return self.g.share @ dmu @ self.g.average
 
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return self.inner.parameter_names
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        dmu = self.inner.dmu_dparameters(*self._contact_level(z, F))  # (B, nc, S)
+        return np.einsum("gc,bcs->bgs", self.g.share, dmu)
+
 
 @dataclass(frozen=True)
 class StepQuantities:
@@ -358,6 +366,10 @@ class ParameterDerivatives:
         dv_free: (B, nv, T) derivative of the free velocity, or None likewise.
         dJn: (B, nc, nv, T) derivative of the normal rows' Jacobian, or None (the Anitescu
             generators ``n + alpha t`` move with the friction coefficients).
+        smoothing_from: the first of the trailing columns that are the smoothing policy's
+            numeric parameters (:meth:`SmoothingPolicy.dmu_dparameters`: they move mu at fixed
+            distances, and nothing else), or None when there are none. Their entries in the
+            arrays above are zero.
     """
 
     dphi: np.ndarray
@@ -365,6 +377,7 @@ class ParameterDerivatives:
     dW: np.ndarray | None = None
     dv_free: np.ndarray | None = None
     dJn: np.ndarray | None = None
+    smoothing_from: int | None = None
 
 
 @dataclass(frozen=True)
@@ -606,7 +619,7 @@ def _anitescu_step(quant, cone, h, smoothing, gradient, strict, par, options):
         dalpha[fr] = par.dfriction[g.friction[fr]]
         dJn = quant.Jt[:, tangent, :, None] * (dalpha * fr[:, None])[None, :, None, :]
         par_g = ParameterDerivatives(
-            par.dphi[:, g.contact], np.zeros((0, T)), par.dW, par.dv_free, dJn
+            par.dphi[:, g.contact], np.zeros((0, T)), par.dW, par.dv_free, dJn, par.smoothing_from
         )
     r = _lcp_step(
         quant_g, cone_g, h, _GeneratorSmoothing(smoothing, g), gradient, strict, par_g, options,
@@ -741,6 +754,9 @@ def _step_jacobians(quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, 
     if total:
         dmu_rows = expand_mu(smoothing.dmu_dz(z[:, :nc], F[:, :nc, :nc]), cone, h)
         dlam = dlam + lcp.dlam_dmu @ (dmu_rows @ dzn)
+    if par is not None and par.smoothing_from is not None:  # mu's own parameters, z held
+        dmu_s = expand_mu(smoothing.dmu_dparameters(z[:, :nc], F[:, :nc, :nc]), cone, h)
+        dlam[:, :, P + par.smoothing_from :] += lcp.dlam_dmu @ dmu_s
     dx = _chain_out(inner, quant.W, G, dlam, quant.N, dN, v_next, h)  # (B, nq + nv, P [+ T])
     nx = nq + nv
     out = dict(

@@ -9,7 +9,7 @@ Drake system (``drake_abs.systems.LcsPlant``) all call it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -46,6 +46,13 @@ class LCS:
     Matrices: A (dx, dx), B (dx, du), C (dx, d), c (dx,), D (d, dx), E (d, du), F (d, d),
     d (d,). F is checked once at construction (positive semidefinite or P-matrix, see
     :mod:`drake_abs.lcp.matrix_class`) according to ``on_bad_matrix``.
+
+    ``time_step`` (s) is the step h the matrices were built for (a discretised system's
+    matrices contain h): the one place a Drake system (:class:`drake_abs.systems.LcsPlant`)
+    reads its update period from. None for an LCS that is not a time discretisation.
+
+    The matrices are also the model parameters of the step (:attr:`parameter_names`):
+    ``step(..., parameters=True)`` differentiates with respect to every entry.
     """
 
     A: np.ndarray
@@ -58,8 +65,16 @@ class LCS:
     d: np.ndarray
     on_bad_matrix: OnBadMatrix = "raise"
     solver_options: dict = field(default_factory=dict)
+    time_step: float | None = None
 
     def __post_init__(self):
+        if self.time_step is not None:
+            h = self.time_step
+            if isinstance(h, bool) or not isinstance(h, int | float) or not (0 < h < np.inf):
+                raise ValueError(
+                    f"LCS.time_step must be a finite number > 0 (s) or None; got {h!r}"
+                )
+            object.__setattr__(self, "time_step", float(h))
         arrays = {}
         for name in "ABCcDEFd":
             want = (1,) if name in "cd" else (2,)
@@ -102,6 +117,41 @@ class LCS:
         """``(dx, du, d)``."""
         return self.A.shape[0], self.B.shape[1], self.F.shape[0]
 
+    #: The matrices in the order of :attr:`parameter_names`.
+    MATRICES = ("A", "B", "C", "c", "D", "E", "F", "d")
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Every matrix entry, matrix by matrix in :data:`MATRICES` order, row-major:
+        ``"A[0,0]", "A[0,1]", ..., "c[0]", ..., "d[d-1]"``."""
+        names = []
+        for name in self.MATRICES:
+            M = getattr(self, name)
+            if M.ndim == 1:
+                names += [f"{name}[{i}]" for i in range(M.shape[0])]
+            else:
+                names += [f"{name}[{i},{j}]" for i in range(M.shape[0]) for j in range(M.shape[1])]
+        return tuple(names)
+
+    def parameter_values(self) -> np.ndarray:
+        """The matrices' entries (T,), in the order of :attr:`parameter_names`."""
+        return np.concatenate([getattr(self, name).ravel() for name in self.MATRICES])
+
+    def with_parameters(self, values) -> LCS:
+        """The same system with the matrix entries ``values`` (T,) (checked as at construction)."""
+        values = np.asarray(values, dtype=float).reshape(-1)
+        sizes = [getattr(self, name).size for name in self.MATRICES]
+        if values.shape != (sum(sizes),):
+            raise ValueError(
+                f"LCS.with_parameters: values must have shape ({sum(sizes)},) (the entries of "
+                f"{', '.join(self.MATRICES)}); got {values.shape}"
+            )
+        parts = np.split(values, np.cumsum(sizes)[:-1])
+        new = {
+            n: v.reshape(getattr(self, n).shape) for n, v in zip(self.MATRICES, parts, strict=True)
+        }
+        return replace(self, **new)
+
     def contact_distance(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``z = D x + E u + d`` for batched x (B, dx), u (B, du); returns (B, d)."""
         return x @ self.D.T + u @ self.E.T + self.d
@@ -131,6 +181,8 @@ class LCS:
         gradient: GradientMode = "total",
         jacobians: bool = True,
         strict: bool = False,
+        parameters: bool = False,
+        smoothing_parameters: bool = False,
     ) -> Step:
         """Advance a batch of states one step.
 
@@ -143,11 +195,20 @@ class LCS:
                 Algorithm 1): biased wherever mu depends on the state.
             jacobians: compute dx+/dx, dx+/du and the impulse (lam) and mu Jacobians.
             strict: raise instead of warning when the LCP solve does not converge.
+            parameters: also ``dx_dtheta`` (B, dx, T) and ``dimpulse_dtheta`` (B, d, T) with
+                respect to every matrix entry (:attr:`parameter_names`; F enters as
+                ``s = z + F lam``, so ``dlam/dF_ij = dlam/dq_i lam_j``).
+            smoothing_parameters: also (after the matrices' columns, if any) the columns of
+                the smoothing policy's numeric parameters (``"smoothing.<name>"``), at fixed z:
+                in both gradient modes, since they set mu's value rather than its dependence
+                on the state.
 
         Returns:
             a :class:`~drake_abs.contact.step.Step`; ``impulse`` is lam (B, d).
         """
         check_gradient_mode(gradient)
+        if (parameters or smoothing_parameters) and not jacobians:
+            raise ValueError("parameters=True and smoothing_parameters=True need jacobians=True")
         smoothing = Exact() if smoothing is None else smoothing
         X, U, single = self._inputs(x, u)
         z = self.contact_distance(X, U)
@@ -183,6 +244,11 @@ class LCS:
                 jac["dmu_dx"], jac["dmu_du"] = np.zeros(dlam_dx.shape), np.zeros(dlam_du.shape)
             else:
                 jac["dmu_dx"], jac["dmu_du"] = dmu_dz @ self.D, dmu_dz @ self.E
+            if parameters or smoothing_parameters:
+                names, dx_dt, dlam_dt = self._parameter_jacobians(
+                    X, U, z, lcp, smoothing, dmu_dz, parameters, smoothing_parameters
+                )
+                jac.update(dx_dtheta=dx_dt, dimpulse_dtheta=dlam_dt, theta_names=names)
         out = Step(
             x_next=x_next,
             converged=lcp.converged,
@@ -193,6 +259,57 @@ class LCS:
             **jac,
         )
         return out.first() if single else out
+
+    def _parameter_jacobians(self, X, U, z, lcp, smoothing, dmu_dz, model, smooth):
+        """The theta columns of one batched step: (names, dx+/dtheta (B, dx, T), dlam/dtheta
+        (B, d, T)). dmu_dz is None in the frozen mode (mu's dependence on z and F held)."""
+        nx, nu, nc = self.dims
+        Bn = X.shape[0]
+        lam = lcp.lam
+        direct, dz, dmu, names = [], [], [], []
+        if model:
+            names += self.parameter_names
+            Ix, Ic = np.eye(nx), np.eye(nc)
+
+            def outer(I, v):  # d(M v)/dM for every entry of M: (B, rows, rows * len(v))
+                return np.einsum("ik,bj->bikj", I, v).reshape(Bn, I.shape[0], -1)
+
+            blocks = {  # matrix: (d x+ directly, d z, d q of the LCP beyond z)
+                "A": (outer(Ix, X), None),
+                "B": (outer(Ix, U), None),
+                "C": (outer(Ix, lam), None),
+                "c": (np.broadcast_to(Ix, (Bn, nx, nx)), None),
+                "D": (None, outer(Ic, X)),
+                "E": (None, outer(Ic, U)),
+                "F": (None, None),
+                "d": (None, np.broadcast_to(Ic, (Bn, nc, nc))),
+            }
+            for name in self.MATRICES:
+                size = getattr(self, name).size
+                dx_direct, dz_m = blocks[name]
+                direct.append(dx_direct if dx_direct is not None else np.zeros((Bn, nx, size)))
+                if name == "F":  # s = z + F lam: the LCP's q moves by dF lam, z does not
+                    q_shift = outer(Ic, lam)
+                    dz.append(q_shift)
+                    dmu_F = np.zeros((Bn, nc, size))
+                    if dmu_dz is not None:  # mu may read F's diagonal (GaussianMatched)
+                        diag = smoothing.dmu_dF_diagonal(z, self.F)
+                        dmu_F[:, np.arange(nc), np.arange(nc) * (nc + 1)] = diag
+                    dmu.append(dmu_F)
+                else:
+                    dz_m = dz_m if dz_m is not None else np.zeros((Bn, nc, size))
+                    dz.append(dz_m)
+                    dmu.append(dmu_dz @ dz_m if dmu_dz is not None else np.zeros(dz_m.shape))
+        if smooth:
+            names += tuple(f"smoothing.{n}" for n in smoothing.parameter_names)
+            dmu_s = smoothing.dmu_dparameters(z, self.F)
+            direct.append(np.zeros((Bn, nx, dmu_s.shape[-1])))
+            dz.append(np.zeros(dmu_s.shape))
+            dmu.append(dmu_s)
+        dz_all = np.concatenate(dz, axis=-1)
+        dlam = lcp.dlam_dq @ dz_all + lcp.dlam_dmu @ np.concatenate(dmu, axis=-1)
+        dx = np.concatenate(direct, axis=-1) + self.C @ dlam
+        return tuple(names), dx, dlam
 
 
 @dataclass(frozen=True)
@@ -215,14 +332,26 @@ class LcsStepper:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
-        """An LCS names no model parameters (its matrices are the model)."""
-        return ()
+        """The model parameters: every entry of the LCS's matrices (:attr:`LCS.parameter_names`)."""
+        return self.lcs.parameter_names
 
-    def step(self, x, u, *, jacobians: bool = True, parameters: bool = False) -> Step:
-        """``LCS.step`` with this stepper's smoothing and gradient mode."""
-        if parameters:
-            raise ValueError(
-                "parameters=True: an LcsStepper has no named model parameters "
-                "(use a scene's ComplementarityStepper)"
-            )
-        return self.lcs.step(x, u, self.smoothing, gradient=self.gradient, jacobians=jacobians)
+    def step(
+        self,
+        x,
+        u,
+        *,
+        jacobians: bool = True,
+        parameters: bool = False,
+        smoothing_parameters: bool = False,
+    ) -> Step:
+        """``LCS.step`` with this stepper's smoothing and gradient mode (``parameters``: the
+        matrices' entries; ``smoothing_parameters``: the policy's, after them)."""
+        return self.lcs.step(
+            x,
+            u,
+            self.smoothing,
+            gradient=self.gradient,
+            jacobians=jacobians,
+            parameters=parameters,
+            smoothing_parameters=smoothing_parameters,
+        )

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import ndtr
@@ -82,6 +82,40 @@ class SmoothingPolicy(ABC):
         """True when mu = 0 for every state (hard contact)."""
         return False
 
+    # The policy's numeric parameters (S of them), so that a Drake Context can hold them and
+    # AutoDiffXd can differentiate with respect to them. A policy with none (``Exact``, or one
+    # with a custom function) names none.
+
+    #: The names of the numeric parameters, in the order of :meth:`parameter_values`.
+    parameter_names: tuple[str, ...] = ()
+
+    def parameter_values(self) -> np.ndarray:
+        """The numeric parameters (S,), in the order of :attr:`parameter_names`."""
+        return np.array([float(getattr(self, n)) for n in self.parameter_names])
+
+    def with_parameters(self, values) -> SmoothingPolicy:
+        """The same policy with the numeric parameters ``values`` (S,) (checked as at
+        construction)."""
+        values = np.asarray(values, dtype=float).reshape(-1)
+        if values.shape != (len(self.parameter_names),):
+            raise ValueError(
+                f"{type(self).__name__}.with_parameters: values must have shape "
+                f"({len(self.parameter_names)},) for {self.parameter_names}; got {values.shape}"
+            )
+        if not values.size:
+            return self
+        return replace(self, **dict(zip(self.parameter_names, map(float, values), strict=True)))
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """Derivative of :meth:`mu` with respect to the numeric parameters at fixed z and F,
+        (B, d, S)."""
+        return np.zeros(z.shape + (len(self.parameter_names),))
+
+    def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """Derivative of each contact's mu with respect to its own diagonal entry F_ii at fixed
+        z, (B, d); zero for policies that do not read F (only :class:`GaussianMatched` does)."""
+        return np.zeros(z.shape)
+
 
 @dataclass(frozen=True)
 class Exact(SmoothingPolicy):
@@ -111,6 +145,7 @@ class Fixed(SmoothingPolicy):
         _check_positive(self.value, "Fixed.value", allow_zero=True)
 
     is_constant = True
+    parameter_names = ("value",)
 
     @property
     def is_exact(self) -> bool:
@@ -118,6 +153,9 @@ class Fixed(SmoothingPolicy):
 
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return np.full_like(z, self.value)
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return np.ones(z.shape + (1,))
 
 
 def exponential_decay(mu_min: float, mu_max: float, length: float) -> Callable:
@@ -171,6 +209,24 @@ class ContactAware(SmoothingPolicy):
     def _g(self, dist):
         g = self.g or exponential_decay(self.mu_min, self.mu_max, self.length)
         return g(dist)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """``("mu_max", "length", "mu_min")``; none with a custom ``g``."""
+        return () if self.g is not None else ("mu_max", "length", "mu_min")
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        out = np.zeros(z.shape + (len(self.parameter_names),))
+        if self.g is not None:
+            return out
+        dist, _, any_inactive = self._nearest_inactive(z)
+        dist = np.where(any_inactive, dist, 0.0)
+        e = np.where(any_inactive, np.exp(-dist / self.length), 0.0)  # (B,)
+        d_length = (self.mu_max - self.mu_min) * e * dist / self.length**2
+        out[..., 0] = e[..., None]
+        out[..., 1] = d_length[..., None]
+        out[..., 2] = (1.0 - e)[..., None]
+        return out
 
     def _nearest_inactive(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         inactive = z > 0
@@ -247,9 +303,27 @@ class GaussianMatched(SmoothingPolicy):
         slack = pos_part + Fd * (self.c1 * z + self.c2)
         return Fd, t, kappa, slack
 
+    parameter_names = ("sigma", "c1", "c2")
+
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         _, _, kappa, slack = self._parts(z, F)
         return np.where((kappa > 0) & (slack > 0), kappa * slack, 0.0)
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        # d/dsigma of E[max(0, -(z + w))] and of E[max(0, z + w)] are both phi(z / sigma)
+        Fd, t, kappa, slack = self._parts(z, F)
+        pdf = _INV_SQRT_2PI * np.exp(-0.5 * t * t)
+        dkappa = np.stack([pdf / Fd, z, np.ones_like(z)], axis=-1)
+        dslack = np.stack([pdf, Fd * z, Fd], axis=-1)
+        d = dkappa * slack[..., None] + kappa[..., None] * dslack
+        return np.where(((kappa > 0) & (slack > 0))[..., None], d, 0.0)
+
+    def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        Fd, t, kappa, slack = self._parts(z, F)
+        pdf = _INV_SQRT_2PI * np.exp(-0.5 * t * t)
+        neg_part = self.sigma * pdf - z * ndtr(-t)
+        d = -neg_part / Fd**2 * slack + kappa * (self.c1 * z + self.c2)
+        return np.where((kappa > 0) & (slack > 0), d, 0.0)
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         Fd, t, kappa, slack = self._parts(z, F)
@@ -319,3 +393,20 @@ class TimeStepScaled(SmoothingPolicy):
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return self.scale * self.policy.dmu_dz(z, F)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The inner policy's (as stated at the reference step; the scale is not one)."""
+        return self.policy.parameter_names
+
+    def parameter_values(self) -> np.ndarray:
+        return self.policy.parameter_values()
+
+    def with_parameters(self, values) -> SmoothingPolicy:
+        return replace(self, policy=self.policy.with_parameters(values))
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return self.scale * self.policy.dmu_dparameters(z, F)
+
+    def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        return self.scale * self.policy.dmu_dF_diagonal(z, F)

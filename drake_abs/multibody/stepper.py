@@ -110,27 +110,45 @@ class ComplementarityStepper:
             + tuple(f"mass[{name}]" for name in self.model.massive_bodies)
         )
 
-    def _parameter_derivatives(self, idx, cone, q, v, u) -> ParameterDerivatives:
-        """The theta block of one group's quantities (states q, v, u): every contact's distance
-        falls by the ground height's increase; each frictional contact's coefficient is its own
-        column; the masses move W and the free velocity."""
-        names = self.parameter_names
+    @property
+    def smoothing_parameter_names(self) -> tuple[str, ...]:
+        """The smoothing policy's numeric parameters as ``step(..., smoothing_parameters=True)``
+        names its columns: ``"smoothing.<name>"`` (e.g. ``smoothing.mu_max``)."""
+        return tuple(f"smoothing.{n}" for n in self.smoothing.parameter_names)
+
+    def _parameter_derivatives(self, idx, cone, q, v, u, names) -> ParameterDerivatives:
+        """The theta block of one group's quantities (states q, v, u) for the columns
+        ``names``: every contact's distance falls by the ground height's increase; each
+        frictional contact's coefficient is its own column; the masses move W and the free
+        velocity; the smoothing parameters (trailing columns) move mu only."""
         column = {name: j for j, name in enumerate(names)}
         B, T = q.shape[0], len(names)
         dphi = np.zeros((B, idx.size, T))
-        dphi[:, :, 0] = -1.0
+        if "ground_height" in column:
+            dphi[:, :, column["ground_height"]] = -1.0
         dfriction = np.zeros((cone.frictional.size, T))
         for f, local in enumerate(cone.frictional):
-            dfriction[f, column[f"friction[{idx[local]}]"]] = 1.0
-        masses = [column[f"mass[{name}]"] for name in self.model.massive_bodies]
+            j = column.get(f"friction[{idx[local]}]")
+            if j is not None:
+                dfriction[f, j] = 1.0
+        masses = [column[f"mass[{n}]"] for n in self.model.massive_bodies if f"mass[{n}]" in column]
         dW = np.zeros((B,) + (self.sizes[1],) * 2 + (T,))
         dv_free = np.zeros((B, self.sizes[1], T))
         if masses:
             dW[..., masses], dv_free[..., masses] = self.model.mass_derivatives(q, v, u)
-        return ParameterDerivatives(dphi, dfriction, dW, dv_free)
+        smoothing = [j for name, j in column.items() if name.startswith("smoothing.")]
+        return ParameterDerivatives(
+            dphi, dfriction, dW, dv_free, smoothing_from=min(smoothing) if smoothing else None
+        )
 
     def step(
-        self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True, parameters: bool = False
+        self,
+        x: np.ndarray,
+        u: np.ndarray,
+        *,
+        jacobians: bool = True,
+        parameters: bool = False,
+        smoothing_parameters: bool = False,
     ) -> Step:
         """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared. With ``parameters`` (and
         ``jacobians``), also the derivatives with respect to :attr:`parameter_names`.
@@ -140,8 +158,12 @@ class ComplementarityStepper:
             is each candidate's normal impulse, ``friction_impulse`` its tangential impulse
             (B, nc, 3), ``active`` which candidates were in the LCP.
         """
-        if parameters and not jacobians:
-            raise ValueError("parameters=True needs jacobians=True")
+        if (parameters or smoothing_parameters) and not jacobians:
+            raise ValueError("parameters=True and smoothing_parameters=True need jacobians=True")
+        # the theta columns: the model's parameters, then the smoothing policy's
+        names = (self.parameter_names if parameters else ()) + (
+            self.smoothing_parameter_names if smoothing_parameters else ()
+        )
         nq, nv, nu, nc = self.sizes
         x = np.asarray(x, dtype=float)
         if x.ndim == 1:
@@ -184,9 +206,9 @@ class ComplementarityStepper:
         if groups is not None and self.limits.size:  # the one state's contacts, then limits
             both = np.concatenate([groups[0][1], nc + np.flatnonzero(limit_active[0])])
             groups = [(slice(None), both, groups[0][2])]
-        out = self._solve(q, v, u, active, groups, jacobians, parameters)
+        out = self._solve(q, v, u, active, groups, jacobians, names)
         if pruned:
-            self._repair(q, v, u, active, out, jacobians, parameters)
+            self._repair(q, v, u, active, out, jacobians, names)
         if jacobians and saturated is not None:  # a clipped input does not move the step
             for key in ("dx_du", "dimpulse_du"):
                 out[key] = out[key] * ~saturated[:, None, :]
@@ -207,7 +229,6 @@ class ComplementarityStepper:
                 StepOverflowWarning,
                 stacklevel=2,
             )
-        names = self.parameter_names if parameters else ()
         return Step(active=active[:, :nc], theta_names=names, **out)
 
     def _cone(self, idx: np.ndarray, n_limits: int = 0) -> FrictionCone:
@@ -250,7 +271,7 @@ class ComplementarityStepper:
             return quant, par
         return quant, damped_parameters(par, quant.W, quant.v_free, self.damping, self.model.h)
 
-    def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: bool) -> dict:
+    def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: tuple) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
         then joint-limit rows) in the LCP, one batched LCP per active set (``groups``:
         precomputed, or None): the output arrays."""
@@ -272,8 +293,8 @@ class ComplementarityStepper:
                 dimpulse_dx=np.zeros((B, nc, nq + nv)),
                 dimpulse_du=np.zeros((B, nc, nu)),
             )
-        if parameters:
-            T = len(self.parameter_names)
+        if parameters:  # the theta columns' names
+            T = len(parameters)
             out.update(dx_dtheta=np.empty((B, nq + nv, T)), dimpulse_dtheta=np.zeros((B, nc, T)))
         if groups is None:
             groups = _groups_by_active_set(active)
@@ -288,7 +309,7 @@ class ComplementarityStepper:
             cone = self._cone(idx, lidx.size)
             par = None
             if parameters:
-                par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows])
+                par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows], parameters)
             quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians)
             r = contact_step(
                 quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
@@ -302,7 +323,7 @@ class ComplementarityStepper:
             self._scatter(out, rows, idx, lidx, cone, r, jacobians)
         return out
 
-    def _repair(self, q, v, u, active, out, jacobians: bool, parameters: bool) -> None:
+    def _repair(self, q, v, u, active, out, jacobians: bool, parameters: tuple) -> None:
         """Pruning never lets a step pass through a contact: a candidate left out of the LCP
         (beyond the activation distance) that the step would leave deeper than
         :data:`REPAIR_TOL` below the ground (a fast impact closes more than the activation

@@ -29,7 +29,7 @@ smoother**) is given to the normal row, mu / h to the friction and cone rows
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -82,6 +82,36 @@ class PerContactSmoothing(SmoothingPolicy):
         out = np.zeros(Z.shape + Z.shape[-1:])
         out[:, :, :nc] = expand_mu(dmu_n, self.cone, self.time_step)
         return out.reshape(z.shape + z.shape[-1:])
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The contact policy's."""
+        return self.contact.parameter_names
+
+    def parameter_values(self) -> np.ndarray:
+        return self.contact.parameter_values()
+
+    def with_parameters(self, values) -> SmoothingPolicy:
+        return replace(self, contact=self.contact.with_parameters(values))
+
+    def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        nc = self.cone.sizes()[0]
+        Z = np.atleast_2d(z)
+        d = self.contact.dmu_dparameters(Z[:, :nc], F[..., :nc, :nc])
+        return expand_mu(d, self.cone, self.time_step).reshape(z.shape + d.shape[-1:])
+
+    def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        nc = self.cone.sizes()[0]
+        Z = np.atleast_2d(z)
+        out = np.zeros(Z.shape)
+        out[:, :nc] = self.contact.dmu_dF_diagonal(Z[:, :nc], F[..., :nc, :nc])
+        if Z.shape[1] > nc and np.any(out[:, :nc]):
+            # the friction rows' mu follows the normal row's F_ii, which (B, d) cannot say
+            raise NotImplementedError(
+                "the derivative of a per-contact mu that reads F (GaussianMatched) with "
+                "respect to F, on an LCS with friction rows"
+            )
+        return out.reshape(z.shape)
 
 
 @dataclass(frozen=True)
@@ -162,6 +192,7 @@ class TranslatingBox:
             d=d,
             on_bad_matrix="attempt",
             solver_options=dict(CONTACT_SOLVER_DEFAULTS),
+            time_step=h,
         )
 
     def smoothing(self, contact: SmoothingPolicy | None = None) -> PerContactSmoothing:

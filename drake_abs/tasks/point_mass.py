@@ -48,4 +48,4 @@ def point_mass_lcs(
     E = (h * h / m * e_v)[None, :]
     F = np.array([[h / m]])
     d = np.array([-h * h * gravity - ground_height])
-    return LCS(A, B, C, c, D, E, F, d)
+    return LCS(A, B, C, c, D, E, F, d, time_step=h)

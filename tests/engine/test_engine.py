@@ -53,21 +53,44 @@ def test_every_argument_is_checked_by_name():
     policy = LinearPolicy(NX, NU)
     theta, noise = np.zeros(policy.n_params), np.zeros((2, 5, NU))
     with pytest.raises(TypeError, match="stepper must be a Stepper"):
-        rollout(stepper.lcs, policy, theta, x0, noise, reward)
+        rollout(stepper.smoothing, policy, theta, x0, noise, reward)
     with pytest.raises(TypeError, match="policy must be a Policy"):
         rollout(stepper, object(), theta, x0, noise, reward)
     with pytest.raises(TypeError, match="reward must be a Reward"):
         rollout(stepper, policy, theta, x0, noise, object())
     with pytest.raises(ValueError, match="gradient=True needs a reward"):
         rollout(stepper, policy, theta, x0, noise)
-    with pytest.raises(ValueError, match="LcsStepper names no model parameters"):
-        rollout(stepper, policy, theta, x0, noise, reward, parameters=True)
     with pytest.raises(ValueError, match="parameters=True needs gradient=True"):
         rollout(stepper, policy, theta, x0, noise, reward, gradient=False, parameters=True)
-    with pytest.raises(ValueError, match="an LcsStepper has no named model parameters"):
-        stepper.step(x0[None], np.zeros((1, NU)), parameters=True)
     with pytest.raises(ValueError, match=r"^noise contains NaN"):
         rollout(stepper, policy, theta, x0, np.full((2, 5, NU), np.nan), reward)
+
+
+def test_an_lcs_rollout_differentiates_its_matrices():
+    """An LCS's matrices are its model parameters: the rollout's gradient with respect to the
+    ground offset d[0] and the contact compliance F[0,0] against central differences of
+    rollouts of re-built systems."""
+    stepper, reward, x0 = _ball()
+    policy = LinearPolicy(NX, NU)
+    theta = 0.1 * np.random.default_rng(3).standard_normal(policy.n_params)
+    noise = np.random.default_rng(4).standard_normal((2, 40, NU))
+    traj = rollout(stepper, policy, theta, x0, noise, reward, sigma=0.1, parameters=True)
+    names = stepper.parameter_names
+    assert traj.model_parameter_names == names and traj.grad_model.shape == (2, len(names))
+    values = stepper.lcs.parameter_values()
+    for name in ("d[0]", "F[0,0]"):
+        k = names.index(name)
+        step = 1e-7 * max(1.0, abs(values[k]))
+        e = np.zeros_like(values)
+        e[k] = step
+        plus = replace(stepper, lcs=stepper.lcs.with_parameters(values + e))
+        minus = replace(stepper, lcs=stepper.lcs.with_parameters(values - e))
+        fd = (
+            rollout(plus, policy, theta, x0, noise, reward, sigma=0.1).returns
+            - rollout(minus, policy, theta, x0, noise, reward, sigma=0.1).returns
+        ) / (2 * step)
+        assert np.abs(fd).max() > 1e-3  # the parameter matters along these rollouts
+        np.testing.assert_allclose(traj.grad_model[:, k], fd, rtol=1e-5, atol=1e-6)
 
 
 def test_without_a_reward_the_engine_only_simulates():
