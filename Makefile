@@ -4,7 +4,7 @@ PY          := $(VENV)/bin/python
 STAMP       := $(VENV)/.installed
 CONSTRAINTS := constraints.txt
 
-.PHONY: demo test lint format bench lock clean
+.PHONY: demo test lint format bench docs lock clean
 
 # Install the package with the versions the suite last passed with (constraints.txt), then
 # compile and cache the numba kernels so that the first solve in a new process is fast.
@@ -24,6 +24,11 @@ lint: $(STAMP)
 
 test: lint
 	$(PY) -m pytest tests --nbmake notebooks -q
+
+# The API reference (docs/api, generated from the docstrings) and docs/*.md, as HTML in
+# docs/_build/html. Warnings are errors (-W), references are checked (-n): see docs/conf.py.
+docs: $(STAMP)
+	$(VENV)/bin/sphinx-build -W --keep-going -b html -n docs docs/_build/html
 
 format: $(STAMP)
 	$(VENV)/bin/ruff format .

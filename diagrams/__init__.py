@@ -6,8 +6,15 @@ from drake_abs.diagrams.lcs_simulation import (
     make_lcs_diagram,
     simulate_with_gradient,
 )
+from drake_abs.diagrams.scene_plant import AddComplementarityPlantSceneGraph
 
-__all__ = ["DiagramGradient", "add_lcs_plant", "make_lcs_diagram", "simulate_with_gradient"]
+__all__ = [
+    "AddComplementarityPlantSceneGraph",
+    "DiagramGradient",
+    "add_lcs_plant",
+    "make_lcs_diagram",
+    "simulate_with_gradient",
+]
 
 # Scene-level builders import heavier modules; import them explicitly:
 #   drake_abs.multibody.builder (build_scene_model), drake_abs.diagrams.drake_twin

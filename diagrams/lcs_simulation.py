@@ -18,25 +18,24 @@ from drake_abs.systems import LcsPlant, autodiff
 def add_lcs_plant(
     builder: DiagramBuilder,
     lcs: LCS,
-    time_step: float,
     smoothing: SmoothingPolicy | None = None,
     *,
     gradient: GradientMode = "total",
     u=None,
     name: str = "lcs",
 ) -> LcsPlant:
-    """Add an LcsPlant named ``name`` to ``builder``; with ``u`` given, feed it a constant input
-    (a ConstantVectorSource named ``name + ".u"``), otherwise leave its ``u`` port to the caller."""
-    plant = builder.AddNamedSystem(name, LcsPlant(lcs, time_step, smoothing, gradient))
+    """Add an LcsPlant named ``name`` to ``builder`` (stepped every ``lcs.time_step`` s); with
+    ``u`` given, feed it a constant input (a ConstantVectorSource named ``name + ".u"``),
+    otherwise leave its ``actuation`` port to the caller."""
+    plant = builder.AddNamedSystem(name, LcsPlant(lcs, smoothing, gradient))
     if u is not None:
         source = builder.AddNamedSystem(f"{name}.u", ConstantVectorSource(np.asarray(u, float)))
-        builder.Connect(source.get_output_port(), plant.u_port)
+        builder.Connect(source.get_output_port(), plant.actuation_port)
     return plant
 
 
 def make_lcs_diagram(
     lcs: LCS,
-    time_step: float,
     smoothing: SmoothingPolicy | None = None,
     *,
     gradient: GradientMode = "total",
@@ -44,12 +43,13 @@ def make_lcs_diagram(
     name: str = "lcs",
 ) -> Diagram:
     """A diagram of one LcsPlant. Exported ports, namespaced by ``name``: outputs
-    ``name.state``, ``name.lam``, ``name.mu``; input ``name.u`` unless a constant ``u`` is given."""
+    ``name.state``, ``name.impulse``, ``name.mu``, ``name.converged``; input
+    ``name.actuation`` unless a constant ``u`` is given."""
     builder = DiagramBuilder()
-    plant = add_lcs_plant(builder, lcs, time_step, smoothing, gradient=gradient, u=u, name=name)
+    plant = add_lcs_plant(builder, lcs, smoothing, gradient=gradient, u=u, name=name)
     if u is None:
-        builder.ExportInput(plant.u_port, f"{name}.u")
-    for port in (plant.state_port, plant.lam_port, plant.mu_port):
+        builder.ExportInput(plant.actuation_port, f"{name}.actuation")
+    for port in (plant.state_port, plant.impulse_port, plant.mu_port, plant.converged_port):
         builder.ExportOutput(port, f"{name}.{port.get_name()}")
     diagram = builder.Build()
     diagram.set_name(f"{name}_diagram")

@@ -40,7 +40,6 @@ class PointMassScene:
 
 def make_point_mass_scene(
     lcs: LCS,
-    time_step: float,
     cases: dict[str, SmoothingPolicy],
     *,
     dim: int,
@@ -49,11 +48,15 @@ def make_point_mass_scene(
     spacing: float = 0.12,
     radius: float = 0.03,
 ) -> PointMassScene:
-    """One LcsPlant per entry of ``cases`` (name -> smoothing policy), all fed the same constant
-    input ``u`` (zero by default), each logged every step; with ``meshcat``, a ground slab and one
-    coloured ball per case, spaced ``spacing`` m apart in depth."""
+    """One LcsPlant (stepped every ``lcs.time_step`` s) per entry of ``cases`` (name ->
+    smoothing policy), all fed the same constant input ``u`` (zero by default), each logged
+    every step; with ``meshcat``, a ground slab and one coloured ball per case, spaced
+    ``spacing`` m apart in depth."""
     if not cases:
         raise ValueError("cases must name at least one smoothing policy")
+    time_step = lcs.time_step
+    if time_step is None:
+        raise ValueError("lcs.time_step is None: build the LCS with its time step")
     nx, nu, _ = lcs.dims
     u = np.zeros(nu) if u is None else np.asarray(u, dtype=float)
     builder = DiagramBuilder()
@@ -64,10 +67,10 @@ def make_point_mass_scene(
         )
         meshcat.SetTransform("/ground", RigidTransform([1.0, 0.0, -0.005]))
     for i, (name, smoothing) in enumerate(cases.items()):
-        plant = add_lcs_plant(builder, lcs, time_step, smoothing, u=u, name=name)
+        plant = add_lcs_plant(builder, lcs, smoothing, u=u, name=name)
         plants[name] = plant
         state_logs[name] = LogVectorOutput(plant.state_port, builder, time_step)
-        lam_logs[name] = LogVectorOutput(plant.lam_port, builder, time_step)
+        lam_logs[name] = LogVectorOutput(plant.impulse_port, builder, time_step)
         if meshcat is not None:
             depth = (i - 0.5 * (len(cases) - 1)) * spacing
             vis = PointMassVisualizer(

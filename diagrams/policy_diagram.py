@@ -61,7 +61,7 @@ def build_policy_diagram(
     *,
     sigma: float = 0.0,
     state_port: str = "state",
-    input_port: str = "u",
+    input_port: str = "actuation",
 ) -> PolicyDiagram:
     """Close ``plant`` (a System; its ports ``state_port`` (nx) and ``input_port`` (nu)) with
     ``u = pi(x; theta) + sigma xi_t``, xi_t the rows of ``noise`` (H, nu), and accumulate the

@@ -1,9 +1,10 @@
 """The closed loop of Zuliani et al. (2025) as one Drake diagram: quadcopter + MPC + cost,
 differentiable.
 
-``make_quadcopter_mpc_diagram`` connects :class:`~drake_abs.systems.quadcopter_plant.
-QuadcopterPlant` (the true, nonlinear dynamics), :class:`~drake_abs.systems.mpc_controller.
-MpcController` and :class:`ClosedLoopCost` (the upper-level cost and penalty of
+``make_quadcopter_mpc_diagram`` connects
+:class:`~drake_abs.systems.quadcopter_plant.QuadcopterPlant` (the true, nonlinear dynamics),
+:class:`~drake_abs.systems.mpc_controller.MpcController` and :class:`ClosedLoopCost` (the
+upper-level cost and penalty of
 :class:`drake_abs.mpc.graybox.TrackingCost`, accumulated step by step), plus a log of the
 controller's status. ``simulate_closed_loop`` runs it for T steps; with ``gradient="theta"`` it
 converts the diagram to AutoDiffXd, seeds the controller's theta parameter and returns

@@ -22,31 +22,20 @@ from pydrake.geometry import (
     MeshcatParams,
     MeshcatVisualizer,
     MeshcatVisualizerParams,
-    Rgba,
     Role,
-    Sphere,
+    SceneGraph,
 )
-from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_abs.multibody.builder import add_scene_models, build_scene_model
+from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.geometry_plant import (
+    GROUND_RGBA,
+    GROUND_THICKNESS,
+    ground_pose,
+    make_geometry_plant,
+)
 from drake_abs.multibody.scene import Scene
-
-GROUND_RGBA = Rgba(0.45, 0.52, 0.58, 1.0)
-POINT_CONTACT_RGBA = Rgba(0.85, 0.1, 0.1, 1.0)  # zero-radius contact points
-SPHERE_CONTACT_RGBA = Rgba(0.85, 0.1, 0.1, 0.35)  # contact spheres, see-through
-GROUND_THICKNESS = 0.02  # m
-
-
-def _ground_pose(normal: np.ndarray, height: float, center: np.ndarray) -> RigidTransform:
-    """Pose of the ground slab: top face on the plane ``n . p = height``, under ``center``."""
-    n = normal / np.linalg.norm(normal)
-    R = RotationMatrix.MakeFromOneVector(n, 2)  # slab z along the plane normal
-    on_plane = center - n * (n @ center - height)
-    return RigidTransform(R, on_plane - 0.5 * GROUND_THICKNESS * n)
 
 
 def record_rollout_html(
@@ -83,17 +72,13 @@ def record_rollout_html(
     meshcat.DeleteRecording()
 
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-    add_scene_models(plant, scene, Parser(plant), collisions=False)
-    for j, c in enumerate(scene.contacts):
-        instance = plant.GetModelInstanceByName(c.model) if c.model else None
-        body = plant.GetBodyByName(c.body, instance) if instance else plant.GetBodyByName(c.body)
-        sphere = Sphere(c.radius if c.radius > 0 else contact_radius)
-        rgba = (SPHERE_CONTACT_RGBA if c.radius > 0 else POINT_CONTACT_RGBA).rgba
-        for i, p in enumerate(c.points):
-            name = f"contact_{j}_{i}"
-            plant.RegisterVisualGeometry(body, RigidTransform(p), sphere, name, rgba)
-    plant.Finalize()
+    scene_graph = builder.AddSystem(SceneGraph())
+    plant = make_geometry_plant(scene, scene_graph, contact_radius=contact_radius, ground=False)
+    builder.AddSystem(plant)
+    builder.Connect(
+        plant.get_geometry_pose_output_port(),
+        scene_graph.get_source_pose_port(plant.get_source_id()),
+    )
     nq, nv = plant.num_positions(), plant.num_velocities()
     if xs.shape[1] not in (nq, nq + nv):
         raise ValueError(
@@ -126,7 +111,7 @@ def record_rollout_html(
     meshcat.SetProperty("/Grid", "visible", False)  # the ground slab replaces it
     meshcat.SetProperty("/Axes", "visible", False)
     meshcat.SetObject("ground", Box(side, side, GROUND_THICKNESS), GROUND_RGBA)
-    meshcat.SetTransform("ground", _ground_pose(normal, scene.ground_height, center))
+    meshcat.SetTransform("ground", ground_pose(normal, scene.ground_height, center))
     direction = np.array([0.35, -1.0, 0.45])
     distance = max(1.2, 2.2 * extent)
     meshcat.SetCameraPose(center + distance * direction / np.linalg.norm(direction), center)
@@ -139,8 +124,9 @@ def record_rollout_html(
 
 def rollout_states(scene: Scene, steps: int, u=None) -> np.ndarray:
     """States (steps + 1, nq + nv) of ``scene`` from its initial state under a constant input
-    ``u`` (nu,) (zero by default), stepped by :class:`ComplementarityStepper` with the scene's
-    smoothing and activation distance (no Jacobians)."""
+    ``u`` (nu,) (zero by default), stepped by
+    :class:`~drake_abs.multibody.stepper.ComplementarityStepper` with the scene's smoothing and
+    activation distance (no Jacobians)."""
     model = build_scene_model(scene)
     stepper = model.stepper()
     nu = model.plant.num_actuators()

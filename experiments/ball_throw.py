@@ -39,16 +39,18 @@ from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.engine import rollout
+from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective, first_order, zeroth_order
 from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.policy.training import Adam, train
 from drake_abs.tasks.box_lcs import TranslatingBox
 
+NAME = "ball-throw"
 METHODS = ("ZOPG", "FOPG", "FOPG-BS", "FOPG-ABS")
 
-#: Zhang et al. 2023, section 8.3: the claims this experiment sets ours beside (no numbers
-#: are given).
+#: The claims of Zhang et al. 2023, section 8.3, that this experiment sets ours beside (no
+#: numbers are given).
 PAPER_CLAIMS = {
     "bs_beats_zopg_and_fopg": "FOPG-BS: higher asymptotic return and faster convergence than "
     "both ZOPG and vanilla FOPG",
@@ -221,19 +223,21 @@ def _estimator(method: str, config: Config):
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    """Train every method from every seed; write plots, summary.json and per-run logs."""
+    """Train every method from every seed; write plots, summary.json and per-run logs to
+    ``out`` (default results/ball-throw); ``summary["files"]`` lists them (absolute paths)."""
     config = config or Config()
-    out = Path(out or "results/ball-throw")
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     angles = np.linspace(-0.5, 1.5, config.landscape_points)
     returns, p_final = true_return(config, angles)
     best = int(np.argmax(returns))
     curves, runs = {}, {}
     start_all = time.perf_counter()
+    bar = progress(total=len(config.methods) * len(config.seeds), desc="ball-throw: training")
     for method in config.methods:
         estimator = _estimator(method, config)
         evals, steps, unconverged, seconds, finals = [], [], 0, 0.0, []
         for seed in config.seeds:
+            bar.set_postfix_str(f"{method}, seed {seed}")
             start = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted per row
@@ -251,6 +255,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             steps.append(np.concatenate([[0], np.cumsum(per_iter)]).tolist())
             unconverged += sum(row["unconverged_steps"] for row in rows[:-1])
             finals.append(float(run_.theta[0]))
+            bar.update()
         ev = np.array(evals)
         curves[method] = {"eval_return": ev.tolist(), "simulated_steps": steps[0]}
         runs[method] = {
@@ -274,8 +279,14 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         "claims": _claims(runs),
         "seconds": time.perf_counter() - start_all,
     }
+    bar.close()
     land = landscape(config, angles)
-    _plot(out, config, curves, angles, p_final, land)
+    files = _plot(out, config, curves, angles, p_final, land)
+    files["curves"] = out / "curves.json"
+    files["runs"] = out / "runs"
+    files["summary"] = out / "summary.json"
+    summary["folder"] = str(out)
+    summary["files"] = file_list(files)
     (out / "curves.json").write_text(json.dumps(curves))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
@@ -325,7 +336,16 @@ def _claims(runs: dict) -> dict:
     return out
 
 
-def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> None:
+#: method -> its legend entry
+METHOD_LABELS = {
+    "ZOPG": "ZOPG (zeroth order, exact model)",
+    "FOPG": "FOPG (first order, exact model)",
+    "FOPG-BS": "FOPG, barrier smoothing",
+    "FOPG-ABS": "FOPG, adaptive (ABS)",
+}
+
+
+def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> dict[str, Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -338,7 +358,7 @@ def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> Non
         for ax, xs in zip(
             axes, (np.arange(ev.shape[1]), np.array(c["simulated_steps"])), strict=True
         ):
-            ax.plot(xs, mean, label=method)
+            ax.plot(xs, mean, label=METHOD_LABELS.get(method, method))
             ax.fill_between(xs, mean - std, mean + std, alpha=0.2)
     axes[0].set(xlabel="iteration", ylabel="return  -(p_x(T) - goal)^2  (m^2)",
                 title=f"ball throw: mean and std over {len(config.seeds)} seeds")  # fmt: skip
@@ -349,10 +369,11 @@ def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> Non
     fig.tight_layout()
     fig.savefig(out / "learning_curves.png", dpi=120)
     plt.close(fig)
+    files = {"learning_curves": out / "learning_curves.png"}
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
-    names = {"FOPG": "exact", "FOPG-BS": f"BS mu={config.bs_mu:g}",
-             "FOPG-ABS": f"ABS mu_max={config.abs_mu_max:g}"}  # fmt: skip
+    names = {"FOPG": "exact", "FOPG-BS": f"barrier smoothing, mu = {config.bs_mu:g}",
+             "FOPG-ABS": f"adaptive (ABS), mu_max = {config.abs_mu_max:g}"}  # fmt: skip
     for method, data in land.items():
         axes[0].plot(angles, data["p_final"], label=names[method])
         axes[1].plot(angles, data["dreturn_dangle"], label=names[method])
@@ -366,6 +387,8 @@ def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> Non
     fig.tight_layout()
     fig.savefig(out / "landscape.png", dpi=120)
     plt.close(fig)
+    files["landscape"] = out / "landscape.png"
+    return files
 
 
 def report(summary: dict) -> str:

@@ -46,12 +46,15 @@ import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
+from drake_abs.experiments._common import file_list, progress, readable, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective, first_order
 from drake_abs.policy.gradient_stats import measure_bias, measure_variance, reference_gradient
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.policy.training import Adam, train
+
+NAME = "bias-return"
 
 DESIGNS: dict[str, SmoothingPolicy] = {
     "BS mu=1e-10": Fixed(1e-10),
@@ -239,8 +242,9 @@ def _checkpoint(
     }  # fmt: skip
 
 
-def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
-    """Train every design from every seed; evaluate returns and measure bias at checkpoints."""
+def run_task(task: Task, size: TrainingSize, eval_seed: int, bar=None) -> dict:
+    """Train every design from every seed; evaluate returns and measure bias at checkpoints.
+    ``bar`` (a progress bar) is advanced once per design and seed."""
     if any(c < 0 or c > size.iterations for c in size.checkpoints):
         raise ValueError(f"checkpoints must lie in [0, iterations = {size.iterations}]")
     exact = task.objective(Exact(), size.horizon)
@@ -259,6 +263,8 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
         returns, checkpoints, unconverged, seconds, diverged, errors = [], [], 0, 0.0, {}, {}
         dropped = 0
         for seed in size.seeds:
+            if bar is not None:
+                bar.set_postfix_str(f"{task.name}: {name}, seed {seed}")
             start = time.perf_counter()
             log = train_design(task, smoothing, size, seed)
             seconds += time.perf_counter() - start
@@ -283,6 +289,8 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int) -> dict:
                 except (ValueError, FloatingPointError, UnconvergedStepError) as err:
                     # non-finite or unconverged rollouts: reported
                     checkpoints.append({"seed": seed, "iteration": k, "failed": str(err)})
+            if bar is not None:
+                bar.update()
         R = np.array(returns)
         alive = np.isfinite(R).sum(axis=0)
         with warnings.catch_warnings():  # all-NaN columns (every seed diverged) stay NaN
@@ -338,12 +346,18 @@ def _bias_by_iteration(checkpoints: list[dict], iterations) -> dict:
     return out
 
 
-def run(config: Config | None = None, out: str | Path = "results/bias-return") -> dict:
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Train and measure every task of ``config``; write the figures and summary.json to ``out``
+    (default results/bias-return); ``summary["files"]`` lists them (absolute paths)."""
     config = config or Config()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     start = time.perf_counter()
     summary = {"config": asdict(config), "tasks": {}, "files": {}}
+    sizes = [getattr(config, name) for name in ("hopping_ball", "half_cheetah")]
+    bar = progress(
+        total=sum(len(DESIGNS) * len(s.seeds) for s in sizes if s is not None),
+        desc="bias-return: training runs",
+    )
     with warnings.catch_warnings():
         # counted per step (unconverged_training_steps); the warnings themselves are noise here
         warnings.simplefilter("ignore", LCPConvergenceWarning)
@@ -353,14 +367,15 @@ def run(config: Config | None = None, out: str | Path = "results/bias-return") -
             if size is None:
                 continue
             t = time.perf_counter()
-            result = run_task(Task(name), size, config.eval_seed)
+            result = run_task(Task(name), size, config.eval_seed, bar)
             result["seconds"] = time.perf_counter() - t
             summary["tasks"][name] = result
-            summary["files"][f"figure5_{name}"] = str(
-                _plot(name, result, out / f"figure5_{name}.png")
-            )
+            summary["files"][f"figure5_{name}"] = _plot(name, result, out / f"figure5_{name}.png")
+    bar.close()
     summary["seconds"] = time.perf_counter() - start
-    summary["files"]["summary"] = str(out / "summary.json")
+    summary["files"]["summary"] = out / "summary.json"
+    summary["folder"] = str(out)
+    summary["files"] = file_list(summary["files"])
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
@@ -376,14 +391,14 @@ def _plot(name: str, result: dict, path: Path) -> Path:
         it = np.array(d["eval_iterations"])
         mean = np.array(d["return_mean"], dtype=float)
         std = np.array(d["return_std"], dtype=float)
-        line = ax[0].plot(it, mean, label=design)[0]
+        line = ax[0].plot(it, mean, label=readable(design))[0]
         ax[0].fill_between(it, mean - std, mean + std, alpha=0.2, color=line.get_color())
         ks = sorted(int(k) for k in d["bias_by_iteration"])
         b = [d["bias_by_iteration"][str(k)]["median_bias"] for k in ks]
         noise = [d["bias_by_iteration"][str(k)]["median_noise"] or np.nan for k in ks]
         ax[1].plot(
             ks, [np.nan if x is None else x for x in b], "o-", color=line.get_color(),
-            label=design,
+            label=readable(design),
         )  # fmt: skip
         unresolved = [i for i, x in enumerate(b) if x is None]
         ax[1].scatter(

@@ -22,8 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody.scene import Scene
+
+NAME = "box-convergence"
 
 _BOX_SDF = """<?xml version="1.0"?>
 <sdf version="1.9">
@@ -131,14 +134,18 @@ def run_case(scene: Scene, steps: int, push: float) -> dict:
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    """Run the sweep; returns (and writes to ``out``/summary.json) the table."""
+    """Run the sweep; returns the table and writes it to summary.json in ``out`` (default
+    results/box-convergence); ``summary["files"]`` lists it (absolute path)."""
     config = config or Config()
+    out = results_dir(NAME, out)
     rows = []
-    grid = itertools.product(
+    axes = (
         config.policies, config.frictions, config.masses, config.mobility_ratios, config.time_steps
-    )
+    )  # fmt: skip
+    grid = itertools.product(*axes)
+    cases = int(np.prod([len(a) for a in axes]))
     with tempfile.TemporaryDirectory() as folder:
-        for policy, friction, mass, ratio, h in grid:
+        for policy, friction, mass, ratio, h in progress(grid, total=cases, desc=f"{NAME}: cases"):
             scene = box_scene(Path(folder), friction, mass, ratio, h, policy)
             result = run_case(scene, config.steps, push=2.0 * mass * 9.81 * 0.3)
             rows.append(
@@ -155,10 +162,10 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         "median_iterations": float(np.median([r["median_iterations"] for r in rows])),
         "max_iterations": int(max(r["max_iterations"] for r in rows)),
         "rows": rows,
+        "folder": str(out),
+        "files": file_list({"summary": out / "summary.json"}),
     }
-    if out is not None:
-        Path(out).mkdir(parents=True, exist_ok=True)
-        (Path(out) / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
 

@@ -1,15 +1,21 @@
-"""The ``drake-abs`` command line.
+"""The drake-abs command line.
 
 drake-abs demo [--out DIR] [--duration S] [--no-meshcat]
-drake-abs experiment NAME [--out DIR] [--test-size]
+drake-abs experiment NAME [--out DIR] [--test-size] [--no-progress]
+drake-abs experiment --list
 drake-abs record SCENE [--steps N] [--out FILE]
+drake-abs list
 drake-abs precompile
+drake-abs --version
+
+Names are shown with dashes (gradient-variance, box-push); underscores are accepted too.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import sys
 from pathlib import Path
 
@@ -31,63 +37,268 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 
+#: Experiment name -> one plain line for ``drake-abs list`` and the help.
+DESCRIPTIONS: dict[str, str] = {
+    "bouncing-ball": "the bouncing ball: exact contact, BS and ABS (Zhang et al. 2023, Fig. 2)",
+    "drake-comparison": "a pushed box and a dropped ball, ours beside Drake's SAP, Similar, Lagged",
+    "box-convergence": "convergence of the frictional contact solver over a grid of box settings",
+    "mpc-quadcopter": "gray-box tuning of a quadcopter MPC (Zuliani et al. 2025, Figs. 1 and 2)",
+    "gradient-variance": "policy-gradient variance against horizon (Zhang et al. 2023, Fig. 3)",
+    "bias-return": "training with BS and ABS: return and gradient bias (Zhang et al. 2023, Fig. 5)",
+    "ball-throw": "learning a throw with ZOPG, FOPG, FOPG-BS, FOPG-ABS (Zhang et al. 2023, 8.3)",
+    "smoothing-vs-rs": "barrier against randomised smoothing (Zhang et al. 2023, Fig. 6)",
+    "speed-accuracy": "cost against accuracy of every setting, ours and Drake's",
+    "mujoco-comparison": "gymnasium's Hopper and HalfCheetah beside MuJoCo and Drake SAP",
+    "scene-recordings": "robots and a pushed box recorded as Meshcat HTML pages",
+}
+
+
+def display_name(name: str) -> str:
+    """The one spelling the CLI shows: dashes (``box_push`` -> ``box-push``)."""
+    return name.replace("_", "-")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("drake-abs")
+    except PackageNotFoundError:  # run from a checkout that is not installed
+        return "unknown (not installed)"
+
+
+# ---------------------------------------------------------------------------------- argument types
+
+
+def positive_int(option: str, example: str = "100"):
+    """An argparse type for ``option``: an integer > 0 (argparse names the option in its
+    error message)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected a positive whole number such as {example}, got {text!r}"
+            ) from None
+        if value <= 0:
+            raise argparse.ArgumentTypeError(
+                f"expected a positive whole number such as {example}, got {text!r}"
+            )
+        return value
+
+    parse.__name__ = "positive integer"
+    return parse
+
+
+def positive_float(option: str, example: str = "1.5", unit: str = "seconds"):
+    """An argparse type for ``option``: a finite number > 0 (argparse names the option in its
+    error message)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(
+                f"expected a positive finite number of {unit} such as {example}, got {text!r}"
+            )
+        return value
+
+    parse.__name__ = "positive number"
+    return parse
+
+
+def experiment_name(text: str) -> str:
+    """An argparse type: an experiment name in either spelling, as its dashed name."""
+    return display_name(text.strip().lower())
+
+
+def _shipped_scenes() -> list[str]:
+    from drake_abs.multibody.scene import shipped_scenes
+
+    return shipped_scenes()
+
+
+def scene_argument(text: str) -> str:
+    """An argparse type: a scene YAML file, or a shipped scene's name in either spelling (as the
+    scene's own name, e.g. ``box-push`` -> ``box_push``), or a ``package://`` URI."""
+    if text.startswith("package://"):
+        return text
+    path = Path(text).expanduser()
+    if path.suffix in (".yaml", ".yml") or path.is_file():
+        if not path.is_file():
+            raise argparse.ArgumentTypeError(f"no scene file {text!r}")
+        return str(path.resolve())
+    shipped = _shipped_scenes()
+    by_display = {display_name(name): name for name in shipped}
+    name = by_display.get(display_name(text.strip().lower()))
+    if name is None:
+        raise argparse.ArgumentTypeError(
+            f"no scene {text!r}: give a scene YAML file or one of "
+            + ", ".join(display_name(n) for n in shipped)
+        )
+    return name
+
+
+# ------------------------------------------------------------------------------------- commands
+
+
+def listing() -> str:
+    """The experiments (one plain line each) and the shipped scenes."""
+    width = max(len(n) for n in EXPERIMENTS)
+    lines = ["experiments (drake-abs experiment NAME [--test-size]):"]
+    lines += [f"  {name:{width}s}  {DESCRIPTIONS[name]}" for name in EXPERIMENTS]
+    lines.append("")
+    lines.append("shipped scenes (drake-abs record SCENE):")
+    lines += [f"  {display_name(name)}" for name in _shipped_scenes()]
+    return "\n".join(lines)
+
+
+def _print_report(report: str, folder: Path) -> None:
+    print(report)
+    print(f"results written to {folder}")
+
 
 def _run_demo(out: Path, *, duration: float | None, meshcat: bool) -> int:
+    from drake_abs.experiments._common import results_dir
     from drake_abs.experiments.bouncing_ball import Config, report, run
 
     kwargs = {"meshcat": meshcat}
     if duration is not None:
         kwargs["duration"] = duration
-    print(report(run(Config(**kwargs), out)))
-    print(f"results written to {out.resolve()}")
+    folder = results_dir("demo", out)
+    _print_report(report(run(Config(**kwargs), folder)), folder)
     return 0
 
 
-def _run_standard(module_name: str, out: Path, *, test_size: bool) -> int:
-    module = importlib.import_module(f"drake_abs.experiments.{module_name}")
+def _run_standard(name: str, out: Path | None, *, test_size: bool) -> int:
+    from drake_abs.experiments._common import default_out
+
+    module = importlib.import_module(f"drake_abs.experiments.{STANDARD_EXPERIMENTS[name]}")
     config = module.Config.test_size() if test_size else module.Config()
-    print(module.report(module.run(config, out)))
-    print(f"results written to {out.resolve()}")
+    folder = default_out(name) if out is None else out.expanduser().resolve()
+    _print_report(module.report(module.run(config, folder)), folder)
     return 0
 
 
-def _record(scene_arg: str, steps: int, out: str | None) -> int:
+def _record(scene, steps: int, out: str | None) -> int:
     from drake_abs.diagrams.scene_visualization import record_scene
-    from drake_abs.multibody.builder import PACKAGE_DIR
-    from drake_abs.multibody.scene import Scene
 
-    path = Path(scene_arg)
-    if not path.is_file():
-        path = PACKAGE_DIR / "scenes" / f"{scene_arg}.yaml"
-    if not path.is_file():
-        shipped = sorted(p.stem for p in (PACKAGE_DIR / "scenes").glob("*.yaml"))
-        print(f"no scene {scene_arg!r}: give a YAML file or one of {shipped}", file=sys.stderr)
-        return 2
-    scene = Scene.from_yaml(path)
-    html = Path(out or f"results/{scene.name}.html")
+    html = Path(out or f"results/{scene.name}.html").expanduser().resolve()
     html.parent.mkdir(parents=True, exist_ok=True)
     record_scene(scene, steps, html)
-    print(f"recorded {steps} steps of {scene.name} (Meshcat, localhost) to {html.resolve()}")
+    print(f"recorded {steps} steps of {scene.name} (Meshcat, localhost) to {html}")
     return 0
+
+
+def _check_folder(parser: argparse.ArgumentParser, out: str | None) -> None:
+    path = None if out is None else Path(out).expanduser()
+    if path is not None and path.exists() and not path.is_dir():
+        parser.error(f"argument --out: {out!r} is a file, not a folder")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="drake-abs",
+        description="Adaptive barrier smoothing on Drake: the demo, the papers' experiments, "
+        "scene recordings.",
+        epilog="Names are shown with dashes; the same names with underscores are accepted too. "
+        "'drake-abs list' shows every experiment and scene.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    demo = sub.add_parser(
+        "demo",
+        help="the bouncing-ball demo, with a guide to its plots (Zhang et al. 2023, Figure 2)",
+        description="Run the bouncing-ball demo, write its plots, a Meshcat recording and "
+        "summary.json, and print what to look at.",
+    )
+    demo.add_argument(
+        "--out", default="results/demo", metavar="DIR", help="results folder (default: %(default)s)"
+    )
+    demo.add_argument(
+        "--duration",
+        type=positive_float("--duration", "1.0"),
+        default=None,
+        metavar="S",
+        help="simulated seconds, at least one time step of 0.01 s (default: 1.0)",
+    )
+    demo.add_argument("--no-meshcat", action="store_true", help="skip the Meshcat HTML recording")
+
+    experiment_help = "\n".join(f"  {n:18s} {DESCRIPTIONS[n]}" for n in EXPERIMENTS)
+    exp = sub.add_parser(
+        "experiment",
+        help="reproduce one of the papers' experiments (see 'drake-abs list')",
+        description="Run one experiment and write its plots and summary.json to its results "
+        "folder.",
+        epilog="experiments:\n" + experiment_help,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    exp.add_argument(
+        "name",
+        nargs="?",
+        type=experiment_name,
+        choices=EXPERIMENTS,
+        metavar="NAME",
+        help="the experiment, e.g. gradient-variance (listed below)",
+    )
+    exp.add_argument("--list", action="store_true", help="list the experiments and exit")
+    exp.add_argument(
+        "--out", default=None, metavar="DIR", help="results folder (default: results/NAME)"
+    )
+    exp.add_argument("--test-size", action="store_true", help="the reduced size CI runs")
+    exp.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+    rec = sub.add_parser(
+        "record",
+        help="record a scene's rollout as a self-contained HTML page",
+        description="Roll a scene out from its initial state with zero actuation and write "
+        "the Meshcat recording as one HTML page (open it in a browser, no server needed).",
+    )
+    rec.add_argument(
+        "scene",
+        type=scene_argument,
+        metavar="SCENE",
+        help="a scene YAML file, or a shipped scene such as box-push (see 'drake-abs list')",
+    )
+    rec.add_argument(
+        "--steps",
+        type=positive_int("--steps", "100"),
+        default=100,
+        metavar="N",
+        help="time steps to simulate, a positive whole number (default: %(default)s)",
+    )
+    rec.add_argument(
+        "--out", default=None, metavar="FILE", help="HTML file (default: results/SCENE.html)"
+    )
+    parser.subcommands = {"demo": demo, "experiment": exp, "record": rec}
+
+    sub.add_parser(
+        "list",
+        help="list the experiments and the shipped scenes",
+        description="List the experiments (one line each) and the shipped scenes.",
+    )
+    sub.add_parser(
+        "precompile",
+        help="compile and cache the numba kernels (make does this)",
+        description="Compile and cache the numba kernels once per install.",
+    )
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="drake-abs", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="the bouncing-ball demo (Zhang et al. 2023, Figure 2)")
-    demo.add_argument("--out", default="results/demo", help="results folder (default: %(default)s)")
-    demo.add_argument("--duration", type=float, default=None, help="simulated seconds")
-    demo.add_argument("--no-meshcat", action="store_true", help="skip the Meshcat HTML recording")
-    exp = sub.add_parser("experiment", help="reproduce one of the papers' experiments")
-    exp.add_argument("name", choices=EXPERIMENTS)
-    exp.add_argument("--out", default=None, help="results folder (default: results/NAME)")
-    exp.add_argument("--test-size", action="store_true", help="the reduced size CI runs")
-    rec = sub.add_parser("record", help="record a scene's rollout as a self-contained HTML page")
-    rec.add_argument("scene", help="a scene YAML, or the name of a shipped scene (e.g. box_push)")
-    rec.add_argument("--steps", type=int, default=100)
-    rec.add_argument("--out", default=None, help="HTML file (default: results/SCENE.html)")
-    sub.add_parser("precompile", help="compile and cache the numba kernels (make does this)")
+    parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "no_progress", False):
+        from drake_abs.experiments._common import set_progress
+
+        set_progress(False)
+    if args.command == "list" or (args.command == "experiment" and args.list):
+        print(listing())
+        return 0
     if args.command == "precompile":
         from drake_abs.experiments.precompile import precompile
 
@@ -95,12 +306,34 @@ def main(argv: list[str] | None = None) -> int:
         total = sum(precompile().values())
         print(f"done in {total:.1f} s")
         return 0
+    sub = parser.subcommands[args.command]
     if args.command == "record":
-        return _record(args.scene, args.steps, args.out)
+        if args.out is not None and Path(args.out).expanduser().is_dir():
+            sub.error(f"argument --out: {args.out!r} is a folder; give an HTML file name")
+        from drake_abs.multibody.scene import Scene
+
+        try:
+            scene = Scene.load(args.scene)
+        except (ValueError, OSError) as err:  # a malformed or unreadable scene file
+            sub.error(f"argument SCENE: {err}")
+        return _record(scene, args.steps, args.out)
     if args.command == "demo":
+        _check_folder(sub, args.out)
+        if args.duration is not None:
+            from drake_abs.experiments.bouncing_ball import Config
+
+            h = Config.time_step
+            if args.duration < h:
+                sub.error(
+                    f"argument --duration: expected at least one time step ({h:g} s), "
+                    f"got {args.duration:g}"
+                )
         return _run_demo(Path(args.out), duration=args.duration, meshcat=not args.no_meshcat)
-    out = Path(args.out or f"results/{args.name}")
-    return _run_standard(STANDARD_EXPERIMENTS[args.name], out, test_size=args.test_size)
+    if args.name is None:
+        sub.error("the following arguments are required: NAME (see 'drake-abs list')")
+    _check_folder(sub, args.out)
+    out = None if args.out is None else Path(args.out)
+    return _run_standard(args.name, out, test_size=args.test_size)
 
 
 if __name__ == "__main__":

@@ -52,6 +52,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from drake_abs.experiments._common import file_list, progress, results_dir  # noqa: E402
+
+NAME = "drake-comparison"
 GRAVITY = 9.81
 OURS = ("exact", "bs", "abs")
 DRAKE = ("sap", "similar", "lagged")
@@ -66,6 +69,14 @@ _PRETTY = {
     "lagged": "Drake Lagged",
     "sap_hydroelastic": "Drake SAP hydroelastic",
     "analytic": "rigid Coulomb (continuous)",
+}
+#: the plots' legend entries
+_LEGEND = {
+    **_PRETTY,
+    "exact": "ours, exact",
+    "bs": "ours, barrier smoothing",
+    "abs": "ours, adaptive (ABS)",
+    "sap_hydroelastic": "Drake SAP, hydroelastic",
 }
 
 
@@ -530,7 +541,9 @@ def simulate_scene(scene: str, h: float, config: Config, *, gradients: bool,
         models[name] = ("ours", roll, grad)
     results = {}
     slope_name, row, col = SLOPE[scene]
-    for name, (kind, roll, grad) in models.items():
+    bar = progress(models.items(), total=len(models), desc=f"{scene}, h = {h:g} s: models")
+    for name, (kind, roll, grad) in bar:
+        bar.set_postfix_str(_PRETTY.get(name, name))
         x0 = _settled(x_init, lambda x, r=roll: r(x, np.zeros_like(u), n_settle)[0]) if settle \
             else x_init  # fmt: skip
         xs, seconds, converged = roll(x0, u, n)
@@ -598,12 +611,17 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     trajectories.png and gradients.png to ``out`` (default results/drake-comparison); return
     the summary."""
     config = config or Config()
-    out = Path(out or "results/drake-comparison").resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     runs = {}
-    for scene in ("box", "ball"):
-        runs[scene] = {"coarse": simulate_scene(scene, config.time_step, config, gradients=True)}
-        if config.fine_time_step:
+    jobs = [(scene, "coarse") for scene in ("box", "ball")]
+    if config.fine_time_step:
+        jobs = [(scene, label) for scene in ("box", "ball") for label in ("coarse", "fine")]
+    for scene, label in progress(jobs, desc=f"{NAME}: scenes and steps"):
+        if label == "coarse":
+            runs[scene] = {
+                "coarse": simulate_scene(scene, config.time_step, config, gradients=True)
+            }
+        else:
             runs[scene]["fine"] = simulate_scene(
                 scene, config.fine_time_step, config, gradients=False, ours=config.fine_ours
             )
@@ -641,8 +659,9 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     }
     (out / "comparison.md").write_text(report(summary))
     files["markdown"] = out / "comparison.md"
-    summary["files"] = {k: str(v) for k, v in files.items()}
-    summary["files"]["json"] = str(out / "comparison.json")
+    files["json"] = out / "comparison.json"
+    summary["folder"] = str(out)
+    summary["files"] = file_list(files)
     (out / "comparison.json").write_text(json.dumps(_finite_or_none(summary), indent=2))
     return summary
 
@@ -882,20 +901,23 @@ def _plot_trajectories(path: Path, runs: dict) -> Path:
         for k, m in box["models"].items():
             tt = h * np.arange(len(m["xs"]))
             kw = {"color": _color(k), "ls": style, "lw": 1.4}
-            lab = f"{_PRETTY[k]} h={h:g}"
+            lab = f"{_LEGEND[k]}, h = {1e3 * h:g} ms"
             axes[0, 0].plot(tt, m["xs"][:, 0], label=lab, **kw)
             axes[0, 1].plot(tt, 1e3 * (m["xs"][:, 1] - m["x0"][1]), label=lab, **kw)
         h = ball["time_step"]
         for k, m in ball["models"].items():
             tt = h * np.arange(len(m["xs"]))
             kw = {"color": _color(k), "ls": style, "lw": 1.4}
-            lab = f"{_PRETTY[k]} h={h:g}"
+            lab = f"{_LEGEND[k]}, h = {1e3 * h:g} ms"
             axes[1, 0].plot(tt, 1e3 * (m["xs"][:, 2] - BALL_RADIUS), label=lab, **kw)
             axes[1, 1].plot(tt, m["xs"][:, 7], label=lab, **kw)
     a = runs["box"]["coarse"]["analytic"]
     if a["continuous_m"] is not None:
-        axes[0, 0].axhline(a["continuous_m"], color="gray", ls="--", lw=1, label="continuous")
-        axes[0, 0].axhline(a["discrete_m"], color="gray", ls="-.", lw=1, label="discrete h")
+        axes[0, 0].axhline(
+            a["continuous_m"], color="gray", ls="--", lw=1, label="rigid Coulomb, continuous time"
+        )
+        axes[0, 0].axhline(a["discrete_m"], color="gray", ls="-.", lw=1,
+                           label="rigid Coulomb, discrete step h")  # fmt: skip
     axes[0, 0].set(xlabel="t (s)", ylabel="x (m)", title="Box: position after the push")
     axes[0, 1].set(xlabel="t (s)", ylabel="z - z_0 (mm)", title="Box: height (hop)")
     axes[1, 0].set(xlabel="t (s)", ylabel="z - r (mm)", title="Ball: ground clearance")
@@ -924,9 +946,9 @@ def _plot_gradients(path: Path, summary: dict) -> Path:
         for i in range(rel.shape[0]):
             for j in range(rel.shape[1]):
                 ax.text(j, i, f"{rel[i, j]:.2g}", ha="center", va="center", color="w", fontsize=7)
-        labels = [f"{d}\nd/d{name}" for d in DRAKE for _, name in parts]
+        labels = [f"{_PRETTY[d]}\nd/d{name}" for d in DRAKE for _, name in parts]
         ax.set_xticks(range(rel.shape[1]), labels, fontsize=7)
-        ax.set_yticks(range(len(OURS)), [_PRETTY[o] for o in OURS], fontsize=8)
+        ax.set_yticks(range(len(OURS)), [_LEGEND[o] for o in OURS], fontsize=8)
         ax.set_title(
             f"{scene}: ||J_ours - J_Drake|| / ||J_Drake|| of d x_T / d (x_0, v_0, u), log10 colour",
             fontsize=9,
@@ -938,7 +960,7 @@ def _plot_gradients(path: Path, summary: dict) -> Path:
         width = 0.8 / len(models)
         for i, k in enumerate(models):
             vals = [g["entries"][k].get(n, np.nan) for n in names]
-            ax.bar(np.arange(len(names)) + i * width, vals, width, label=_PRETTY[k],
+            ax.bar(np.arange(len(names)) + i * width, vals, width, label=_LEGEND[k],
                    color=_color(k))  # fmt: skip
         ax.set_xticks(np.arange(len(names)) + 0.4 - width / 2, names, fontsize=7, rotation=15)
         ax.set_yscale("symlog", linthresh=1e-2)

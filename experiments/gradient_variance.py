@@ -39,10 +39,14 @@ import numpy as np
 from drake_abs import point_mass_lcs
 from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.experiments._common import file_list, progress, readable, results_dir
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
+
+NAME = "gradient-variance"
+MODES = ("frozen", "total")  # the gradient modes measured (variance_bias_sweep's default)
 
 
 @dataclass(frozen=True)
@@ -139,23 +143,35 @@ def _label(row: dict) -> str:
     return row["policy"] if row["modes_coincide"] else f"{row['policy']} ({row['mode']})"
 
 
-def run(config: Config | None = None, out: str | Path = "results/gradient-variance") -> dict:
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Measure the variance (and bias) sweep; write the figures and summary.json to ``out``
+    (default results/gradient-variance); ``summary["files"]`` lists them (absolute paths)."""
     config = config or Config()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     start = time.perf_counter()
     theta = spring_theta()
+    pols = policies(config)
+    points = len(config.horizons) * sum(1 if p.is_constant else len(MODES) for p in pols.values())
+    bar = progress(total=points, desc="gradient-variance: points")
+
+    def tick(line: str) -> None:
+        bar.set_postfix_str(line)
+        bar.update()
+
     rows = variance_bias_sweep(
         lambda pol, mode, H: hopping_ball(pol, mode, H, config.sigma),
         theta,
-        policies(config),
+        pols,
         config.horizons,
         batches=config.batches,
         seed=config.seed,
         estimator=fopg(config.samples),
+        modes=MODES,
         reference_samples=config.reference_samples or None,
         reference_batches=config.reference_batches,
+        progress=tick,
     )
+    bar.close()
     curves: dict[str, dict] = {}
     for row in rows:
         c = curves.setdefault(_label(row), {"horizon": [], "variance": [], "variance_se": []})
@@ -186,12 +202,14 @@ def run(config: Config | None = None, out: str | Path = "results/gradient-varian
         "rows": rows,
         "seconds": time.perf_counter() - start,
     }
-    summary["files"] = {
-        "figure3": str(_plot_variance(curves, out / "figure3_variance.png")),
-        "summary": str(out / "summary.json"),
+    files = {
+        "figure3": _plot_variance(curves, out / "figure3_variance.png"),
+        "summary": out / "summary.json",
     }
     if config.reference_samples:
-        summary["files"]["bias"] = str(_plot_bias(curves, out / "bias.png"))
+        files["bias"] = _plot_bias(curves, out / "bias.png")
+    summary["folder"] = str(out)
+    summary["files"] = file_list(files)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
@@ -245,7 +263,8 @@ def _plot_variance(curves: dict, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for name, c in curves.items():
         ax.errorbar(
-            c["horizon"], c["variance"], yerr=c["variance_se"], marker="o", ms=3, label=name,
+            c["horizon"], c["variance"], yerr=c["variance_se"], marker="o", ms=3,
+            label=readable(name),
             capsize=2, **_style(name, list(curves)),
         )  # fmt: skip
     ax.set(
@@ -272,7 +291,7 @@ def _plot_bias(curves: dict, path: Path) -> Path:
         H = np.array(c["horizon"], float)
         b = np.array([np.nan if x is None else x for x in c["bias"]], float)
         style = _style(name, list(curves))
-        ax.plot(H, b, marker="o", ms=3, label=name, **style)
+        ax.plot(H, b, marker="o", ms=3, label=readable(name), **style)
         unresolved = np.isnan(b)
         ax.scatter(
             H[unresolved], 2 * np.array(c["bias_noise"])[unresolved], marker="v",

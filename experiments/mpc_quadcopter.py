@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.mpc.graybox import (
     ClosedLoopResult,
     GrayBoxResult,
@@ -49,6 +50,7 @@ from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cos
 from drake_abs.mpc.sysid import LinearModel, identify_linear_model
 from drake_abs.tasks import quadcopter as qc
 
+NAME = "mpc-quadcopter"
 PAPER_TRAINED_COST = 1111.71
 PAPER_EXACT_MODEL_COST = 1103.04
 X_REF = (-6.0, -3.5, 0.0) + (0.0,) * 9
@@ -77,7 +79,7 @@ class Config:
         sysid_trajectories, sysid_length: closed-loop runs (100) and their steps.
         sysid_input_noise: std (rad/s) of the Gaussian input perturbation during identification.
         sysid_spread: half-widths of the uniform initial states around x_ref.
-        delta: eq. 9's smoothing radius (1e-4). theta_bound: Theta = {|theta_i| <= bound}.
+        delta: eq. 9's smoothing radius (1e-4). theta_bound: ``Theta = {|theta_i| <= bound}``.
         penalty_weight: 300. slack_penalty: 25 (linear and quadratic).
         seed: seeds identification noise and the directions v_k.
         meshcat: also write the Meshcat HTML of the two flights.
@@ -244,12 +246,10 @@ class _Counting:
 
 
 def _tune(problem, config, schedule, source, label) -> tuple[GrayBoxResult, dict]:
-    from tqdm.auto import tqdm
-
     evaluate = _Counting(problem, source, config.steps)
-    bar = tqdm(total=config.iterations + 1, desc=label, leave=False)
+    bar = progress(total=config.iterations + 1, desc=method_label(label))
 
-    def progress(rec):
+    def on_iterate(rec):
         bar.set_postfix(total=f"{rec.total:.1f}")
         bar.update()
 
@@ -262,7 +262,7 @@ def _tune(problem, config, schedule, source, label) -> tuple[GrayBoxResult, dict
         rng=np.random.default_rng(config.seed + 1),
         delta=config.delta,
         bound=config.theta_bound,
-        progress=progress,
+        progress=on_iterate,
     )
     bar.close()
     stats = {
@@ -306,8 +306,12 @@ def _exact_reference(problem: _Problem, config: Config) -> tuple[ClosedLoopResul
         r = evaluate(theta, True)
         return r.total, r.gradient
 
+    bar = progress(total=config.reference_iterations, desc="exact model, L-BFGS-B")
+
     def callback(intermediate_result):
         history.append(float(intermediate_result.fun))
+        bar.set_postfix(total=f"{intermediate_result.fun:.1f}")
+        bar.update()
 
     start = time.perf_counter()
     res = scipy.optimize.minimize(
@@ -319,6 +323,7 @@ def _exact_reference(problem: _Problem, config: Config) -> tuple[ClosedLoopResul
         options={"maxiter": config.reference_iterations},
         callback=callback,
     )
+    bar.close()
     final = evaluate(res.x, False)
     info = {
         "method": "L-BFGS-B on the exact-gradient closed-loop cost",
@@ -338,12 +343,11 @@ def _exact_reference(problem: _Problem, config: Config) -> tuple[ClosedLoopResul
     return final, info
 
 
-def run(config: Config | None = None, out: str | Path = "results/mpc-quadcopter") -> dict:
-    """Run the experiment (seeded), write its figures and summary to ``out``; returns the
-    summary dict."""
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Run the experiment (seeded), write its figures and summary to ``out`` (default
+    results/mpc-quadcopter); returns the summary dict (``summary["files"]``: absolute paths)."""
     config = config or Config()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     rng = np.random.default_rng(config.seed)
     start = time.perf_counter()
     problem, sysid = build_problem(config, rng)
@@ -360,7 +364,7 @@ def run(config: Config | None = None, out: str | Path = "results/mpc-quadcopter"
         methods.append(("exact model", Schedule(eta=1.0, name="exact model"), "exact"))
     results: dict[str, GrayBoxResult] = {}
     summary_methods = {}
-    for label, schedule, source in methods:
+    for label, schedule, source in progress(methods, desc=f"{NAME}: methods"):
         result, stats = _tune(problem, config, schedule, source, label)
         results[label] = result
         summary_methods[label] = _method_summary(result, stats)
@@ -406,10 +410,7 @@ def run(config: Config | None = None, out: str | Path = "results/mpc-quadcopter"
             "exact_model_tracking_cost": reference.tracking_cost,
             "initial": trained.trace[0].total,
         }
-    files = {
-        "figure1": str(out / "figure1_convergence.png"),
-        "summary": str(out / "summary.json"),
-    }
+    files = file_list({"figure1": out / "figure1_convergence.png", "summary": out / "summary.json"})
     _figure1(summary_methods, reference_info, Path(files["figure1"]))
     if config.exact_model:
         files["figure2"] = str(out / "figure2_trajectories.png")
@@ -448,7 +449,8 @@ def run(config: Config | None = None, out: str | Path = "results/mpc-quadcopter"
         "comparison": comparison,
         "printed_step_size_check": printed,
         "seconds": time.perf_counter() - start,
-        "files": files,
+        "folder": str(out),
+        "files": file_list(files),
     }
     Path(files["summary"]).write_text(json.dumps(_jsonable(summary), indent=2))
     return summary
@@ -468,6 +470,13 @@ def _jsonable(obj):
     return obj
 
 
+def method_label(label: str) -> str:
+    """The legend entry of a method key (``"gamma=0.5"`` -> ``"gray-box, gamma = 0.5"``)."""
+    if label.startswith("gamma="):
+        return f"gray-box, gamma = {label.split('=', 1)[1]}"
+    return label.replace("(eta=", "(eta = ")
+
+
 def _figure1(methods: dict, reference: dict | None, path: Path) -> None:
     import matplotlib
 
@@ -478,8 +487,8 @@ def _figure1(methods: dict, reference: dict | None, path: Path) -> None:
     for label, m in methods.items():
         k = np.arange(1, len(m["total"]) + 1)
         style = {"color": "k", "ls": "--"} if label == "exact model" else {}
-        ax[0].plot(k, m["tracking_cost"], label=label, **style)
-        ax[1].plot(k, m["violation"], label=label, **style)
+        ax[0].plot(k, m["tracking_cost"], label=method_label(label), **style)
+        ax[1].plot(k, m["violation"], label=method_label(label), **style)
     if reference is not None:
         ax[0].axhline(
             reference["final_tracking_cost"], color="k", ls=":", label="exact model, L-BFGS-B"
@@ -512,11 +521,12 @@ def _figure2(
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
     colors = ("C0", "C1", "C2")
     for i, name in enumerate(("p_x", "p_y", "p_z")):
-        ax[0].plot(t, trained.x[:, i], color=colors[i], label=f"{name} trained")
-        ax[0].plot(t, exact.x[:, i], color=colors[i], ls="-.", label=f"{name} exact model")
+        ax[0].plot(t, trained.x[:, i], color=colors[i], label=f"{name}, trained")
+        ax[0].plot(t, exact.x[:, i], color=colors[i], ls="-.", label=f"{name}, exact model")
     for i, name in enumerate(("roll", "pitch", "yaw")):
-        ax[1].plot(t, trained.x[:, 6 + i], color=colors[i], label=f"{name} trained")
-        ax[1].plot(t, exact.x[:, 6 + i], color=colors[i], ls="-.", label=f"{name} exact model")
+        ax[1].plot(t, trained.x[:, 6 + i], color=colors[i], label=f"{name}, trained")
+        ax[1].plot(t, exact.x[:, 6 + i], color=colors[i], ls="-.",
+                   label=f"{name}, exact model")  # fmt: skip
     ax[0].set(xlabel="t (s)", ylabel="position (m)", title="position")
     ax[1].set(xlabel="t (s)", ylabel="angle (rad)", title="attitude")
     for a in ax:

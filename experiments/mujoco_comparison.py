@@ -29,11 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.experiments._common import file_list, progress, results_dir
+
+NAME = "mujoco-comparison"
 SCENES = ("gym_hopper", "gym_half_cheetah")
 
 #: scene -> (gymnasium asset, gymnasium's frame_skip in the v5 environments)
 GYM_FILES = {"gym_hopper": ("hopper.xml", 4), "gym_half_cheetah": ("half_cheetah.xml", 5)}
 
+#: Why the two simulators' trajectories differ (written into the report).
 WHY_THEY_DIFFER = (
     "Contact law: ours is hard (complementarity): the normal impulse stops penetration within the "
     "step, so the contact points rest on the ground (gap ~ 0). MuJoCo's is soft (solref = 0.02 s "
@@ -288,21 +292,25 @@ def _last_motor_joint(model) -> str:
     return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, jid)
 
 
-def run(config: Config | None = None, out: Path | str | None = None) -> dict:
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Compare every scene of ``config``; write mujoco_comparison.json to ``out`` (default
+    results/mujoco-comparison); ``summary["files"]`` lists it (absolute path)."""
     config = config or Config()
+    out = results_dir(NAME, out)
     logging.getLogger("drake").setLevel(logging.ERROR)  # the MJCF parser's unsupported tags
     import mujoco
 
     summary = {
         "config": asdict(config),
         "mujoco_version": mujoco.__version__,
-        "scenes": [compare_scene(name, config) for name in config.scenes],
+        "scenes": [
+            compare_scene(name, config) for name in progress(config.scenes, desc=f"{NAME}: scenes")
+        ],
         "why_they_differ": WHY_THEY_DIFFER,
+        "folder": str(out),
+        "files": file_list({"summary": out / "mujoco_comparison.json"}),
     }
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "mujoco_comparison.json").write_text(json.dumps(summary, indent=2))
+    (out / "mujoco_comparison.json").write_text(json.dumps(summary, indent=2))
     return summary
 
 
@@ -338,4 +346,4 @@ def report(summary: dict) -> str:
 
 
 if __name__ == "__main__":
-    print(report(run(Config(), Path("results/mujoco-comparison"))))
+    print(report(run(Config())))

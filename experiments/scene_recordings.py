@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.diagrams.scene_visualization import record_rollout_html
+from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.experiments.mujoco_comparison import Config as MujocoConfig
 from drake_abs.experiments.mujoco_comparison import _controls
 from drake_abs.multibody import build_scene_model
@@ -38,6 +39,8 @@ from drake_abs.multibody.posture import (
     STANDING_GAINS,
     stepping_controller,
 )
+
+NAME = "scene-recordings"
 
 #: recording name -> scene
 RECORDINGS: dict[str, str] = {
@@ -144,8 +147,9 @@ def _base_height(sm, xs: np.ndarray) -> np.ndarray:
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    """Roll every recording out and, with ``out``, write its HTML page there (drawn in a new
-    Meshcat bound to localhost)."""
+    """Roll every recording out and write its HTML page (drawn in a new Meshcat bound to
+    localhost) and summary.json to ``out`` (default results/scene-recordings);
+    ``summary["files"]`` lists them (absolute paths)."""
     config = config or Config()
     if not (np.isfinite(config.duration) and config.duration > 0):
         raise ValueError(
@@ -156,21 +160,25 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     unknown = set(config.recordings) - set(RECORDINGS)
     if unknown:
         raise ValueError(f"recordings must be among {sorted(RECORDINGS)}; got {sorted(unknown)}")
-    folder = Path(out) if out is not None else None
-    rows = []
-    for name in config.recordings:
+    folder = results_dir(NAME, out)
+    rows, files = [], {}
+    for name in progress(config.recordings, desc=f"{NAME}: recordings"):
         sm, xs, unconverged = rollout(name, config.duration, config.push_offset)
         row = {"recording": name, "scene": sm.scene.name, "time_step": sm.scene.time_step,
                "steps": len(xs) - 1, "unconverged_steps": unconverged,
                **_facts(name, sm, xs)}  # fmt: skip
-        if folder is not None:
-            page = record_rollout_html(sm.scene, xs, folder / f"{name}.html")
-            row.update(html=page.name, html_bytes=page.stat().st_size)
+        page = record_rollout_html(sm.scene, xs, folder / f"{name}.html")
+        row.update(html=page.name, html_bytes=page.stat().st_size)
+        files[name] = page
         rows.append(row)
-    summary = {"duration_s": config.duration, "rows": rows}
-    if folder is not None:
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "summary.json").write_text(json.dumps(summary, indent=2))
+    files["summary"] = folder / "summary.json"
+    summary = {
+        "duration_s": config.duration,
+        "rows": rows,
+        "folder": str(folder),
+        "files": file_list(files),
+    }
+    (folder / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
 
@@ -186,8 +194,9 @@ def report(summary: dict) -> str:
         lines.append(
             f"  {r['recording']:17s} {r['steps']:4d} steps, {r['unconverged_steps']} unconverged, "
             f"deepest penetration {1e3 * r['deepest_penetration_m']:.2f} mm; {what}"
-            + (f"; {r['html']}" if "html" in r else "")
         )
+    for path in summary.get("files", {}).values():
+        lines.append(f"  {path}")
     return "\n".join(lines)
 
 

@@ -1,6 +1,5 @@
 """Zhang et al. 2023, Figure 6: barrier smoothing (BS) against randomised smoothing (RS) on impact
-contact
-(a dropped ball) and on frictional contact (a pushed box).
+contact (a dropped ball) and on frictional contact (a pushed box).
 
 (a) Impact. A ball (:func:`~drake_abs.tasks.point_mass.point_mass_lcs`, 1-D, 1 kg, h = 0.01 s)
 starts at height y0 moving down at ``drop_speed``; f(y0) = its vertical velocity after
@@ -12,10 +11,9 @@ elsewhere. Compared over a grid of y0:
 - GT: the exact model's derivative (the rollout Jacobian, which resolves the ramp).
 - BS: the derivative of the model smoothed by ``Fixed(mu)``, several mu (larger is smoother).
 - RS, first-order ("bundled", what Zhang et al. (2023) and Suh et al. 2022 call randomised
-smoothing):
-  ``(1/N) sum_i f'(y0 + w_i)`` with ``w ~ N(0, sigma^2)`` and f' the exact derivative, several N.
-  Its expectation is the Gaussian-smoothed GT, but with few samples it mostly misses the ramp:
-  the typical estimate is the constant 0, i.e. an empirical bias.
+  smoothing): ``(1/N) sum_i f'(y0 + w_i)`` with ``w ~ N(0, sigma^2)`` and f' the exact
+  derivative, several N. Its expectation is the Gaussian-smoothed GT, but with few samples it
+  mostly misses the ramp: the typical estimate is the constant 0, i.e. an empirical bias.
 - RS, zeroth-order: ``(1/N) sum_i (f(y0 + w_i) - f(y0)) w_i / sigma^2`` (Gaussian finite
   differences), unbiased for the same smoothed derivative, but noisy.
 
@@ -45,13 +43,15 @@ from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import Fixed
 from drake_abs.contact.unconverged import UnconvergedStepWarning
 from drake_abs.engine import open_loop
+from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.tasks.box_lcs import TranslatingBox
 from drake_abs.tasks.point_mass import point_mass_lcs
 
+NAME = "smoothing-vs-rs"
 G = 9.81
 
-#: |derivative| (1/s) below which an RS estimate counts as the smooth region's constant 0 (the
+#: Absolute derivative (1/s) below which an RS estimate counts as the smooth region's zero (the
 #: exact solver's floor leaves ~1e-9; the ramp is -1/h = -500).
 ZERO = 1e-3
 
@@ -122,7 +122,23 @@ def impact_values(config: Config, heights: np.ndarray, smoothing=None) -> tuple:
     return ro.x[:, -1, 1], ro.dxH_dx0[:, 1, 0], ro.converged.all(axis=1)
 
 
-def impact_experiment(config: Config, rng: np.random.Generator) -> dict:
+def _tick(bar, text: str) -> None:
+    if bar is not None:
+        bar.set_postfix_str(text)
+        bar.update()
+
+
+def _work(config: Config) -> int:
+    """The progress bar's units of the whole run: one per BS curve and per RS draw."""
+    return (
+        len(config.impact_mus)
+        + len(config.impact_samples) * config.impact_repeats
+        + len(config.friction_mus)
+        + len(config.push_samples) * config.push_repeats
+    )
+
+
+def impact_experiment(config: Config, rng: np.random.Generator, bar=None) -> dict:
     y_c = contact_height(config)
     ys = y_c + np.linspace(-config.height_window, config.height_window, config.heights)
     f_gt, g_gt, conv = impact_values(config, ys)
@@ -141,6 +157,7 @@ def impact_experiment(config: Config, rng: np.random.Generator) -> dict:
             "mass": float(np.sum(g) * dy),
             "max_abs_error_away": float(np.abs(g - g_gt)[np.abs(ys - y_c) > 0.05].max()),
         }
+        _tick(bar, f"impact, BS mu = {mu:g}")
     # RS on a coarser grid of heights (all samples of all heights in one batch per draw). The
     # expectation of both RS estimators is the GT convolved with the Gaussian, computed on a
     # fine grid; RS's bias against the GT is that convolution minus the GT (predictable).
@@ -165,6 +182,7 @@ def impact_experiment(config: Config, rng: np.random.Generator) -> dict:
             f_s, g_s = f_s.reshape(yr.size, N), g_s.reshape(yr.size, N)
             fo.append(g_s.mean(axis=1))
             zo.append(((f_s - f_r[:, None]) * w).mean(axis=1) / config.impact_sigma**2)
+            _tick(bar, f"impact, RS N = {N}")
         for key, est in (("rs_fo", np.array(fo)), ("rs_zo", np.array(zo))):
             mean, std = est.mean(axis=0), est.std(axis=0)
             out[key][str(N)] = {
@@ -197,7 +215,7 @@ def push_gradients(config: Config, pushes: np.ndarray, contact=None) -> tuple:
     return ro.x[:, -1, 0], ro.dxH_du[:, :, 0, 0].sum(axis=1), ro.converged.all(axis=1)
 
 
-def friction_experiment(config: Config, rng: np.random.Generator) -> dict:
+def friction_experiment(config: Config, rng: np.random.Generator, bar=None) -> dict:
     box = TranslatingBox(friction=config.friction, time_step=config.time_step)
     u_c = box.friction * box.mass * G
     us = u_c + np.linspace(-config.push_window, config.push_window, config.pushes)
@@ -225,6 +243,7 @@ def friction_experiment(config: Config, rng: np.random.Generator) -> dict:
             # over the pushes whose rollout converged (None when none did)
             "max_abs_error_vs_gt": float(err.max()) if err.size else None,
         }
+        _tick(bar, f"friction, BS mu = {mu:g}")
     at = int(np.argmin(np.abs(us - u_c)))
     for N in config.push_samples:
         est, seconds = [], 0.0
@@ -235,6 +254,7 @@ def friction_experiment(config: Config, rng: np.random.Generator) -> dict:
             seconds += time.perf_counter() - start
             out["unconverged"] += int((~conv).sum())
             est.append(g_s.reshape(n, N).mean(axis=1))
+            _tick(bar, f"friction, RS N = {N}")
         est = np.array(est)
         out["rs"][str(N)] = {
             "first_draw": est[0].tolist(),
@@ -268,16 +288,19 @@ def friction_experiment(config: Config, rng: np.random.Generator) -> dict:
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    """Run (a) and (b); write the figures, curves.json and summary.json to ``out`` (default
+    results/smoothing-vs-rs); ``summary["files"]`` lists them (absolute paths)."""
     config = config or Config()
-    out = Path(out or "results/smoothing-vs-rs")
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     rng = np.random.default_rng(config.seed)
     start = time.perf_counter()
+    bar = progress(total=_work(config), desc=NAME)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted in "unconverged"
         warnings.simplefilter("ignore", UnconvergedStepWarning)  # and "converged_pushes"
-        impact = impact_experiment(config, rng)
-        friction = friction_experiment(config, rng)
+        impact = impact_experiment(config, rng, bar)
+        friction = friction_experiment(config, rng, bar)
+    bar.close()
     summary = {
         "config": asdict(config),
         "impact": _impact_summary(config, impact),
@@ -285,6 +308,11 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         "seconds": time.perf_counter() - start,
     }
     summary["claims"] = _claims(summary)
+    summary["folder"] = str(out)
+    summary["files"] = file_list({
+        "figure6": out / "figure6.png", "rs_cost": out / "rs_cost.png",
+        "curves": out / "curves.json", "summary": out / "summary.json",
+    })  # fmt: skip
     (out / "curves.json").write_text(json.dumps({"impact": impact, "friction": friction}))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     _plot(out, config, impact, friction)
@@ -365,26 +393,30 @@ def _plot(out: Path, config: Config, impact: dict, friction: dict) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.5))
     ax = axes[0]
     y = np.array(impact["y"])
-    ax.plot(y, impact["gt"], "k", lw=2, label="GT (exact)")
+    ax.plot(y, impact["gt"], "k", lw=2, label="exact (ground truth)")
     for mu, b in impact["bs"].items():
-        ax.plot(y, b["grad"], label=f"BS mu={mu}")
+        ax.plot(y, b["grad"], label=f"barrier smoothing, mu = {mu}")
     for N, r in impact["rs_fo"].items():
         ax.plot(impact["y_rs"], r["first_draw"], "o:", ms=3,
-                label=f"RS (first-order) N={N}, one draw")  # fmt: skip
-    ax.plot(impact["y_rs"], impact["rs_expected"], "--", color="gray", label="RS expectation")
+                label=f"randomised smoothing (first order), N = {N}, one draw")  # fmt: skip
+    ax.plot(impact["y_rs"], impact["rs_expected"], "--", color="gray",
+            label="randomised smoothing, expectation")  # fmt: skip
     ax.set(xlabel="initial height y0 (m)", ylabel="d v_y(T) / d y0  (1/s)",
            title="(a) impact: derivative of the post-impact velocity")  # fmt: skip
     ax.set_yscale("symlog", linthresh=1.0)
     ax.legend(fontsize=7)
     ax = axes[1]
     u = np.array(friction["u"])
-    ax.plot(u, friction["gt"], "k", lw=2, label="GT (exact)")
+    ax.plot(u, friction["gt"], "k", lw=2, label="exact (ground truth)")
     for mu, b in friction["bs"].items():
         g = np.array([np.nan if v is None else v for v in b["grad"]])  # gaps: unconverged
-        ax.plot(u, g, label=f"BS mu={mu} ({b['converged_pushes']}/{b['pushes']} converged)")
+        ax.plot(u, g, label=f"barrier smoothing, mu = {mu} "
+                f"({b['converged_pushes']}/{b['pushes']} pushes converged)")  # fmt: skip
     for N, r in friction["rs"].items():
         mean, std = np.array(r["first_draw"]), np.array(r["std"])
-        line = ax.plot(u, mean, ":", label=f"RS N={N} (one draw, +-std band)")[0]
+        line = ax.plot(u, mean, ":", label=f"randomised smoothing, N = {N} (one draw, +-std band)")[
+            0
+        ]
         ax.fill_between(u, mean - std, mean + std, color=line.get_color(), alpha=0.15)
     ax.set(xlabel="push force u (N)", ylabel="d p_x(T) / d u  (m/N)",
            title="(b) frictional box: gradient of the final position")  # fmt: skip
@@ -397,11 +429,12 @@ def _plot(out: Path, config: Config, impact: dict, friction: dict) -> None:
     Ns = [int(N) for N in friction["rs"]]
     stds = [friction["rs"][str(N)]["std_at_threshold"] for N in Ns]
     secs = [friction["rs"][str(N)]["seconds_per_gradient"] for N in Ns]
-    ax.loglog(Ns, stds, "o-", label="RS std at the threshold (m/N)")
-    ax.loglog(Ns, secs, "s-", label="RS seconds per gradient")
+    ax.loglog(Ns, stds, "o-", label="randomised smoothing: std at the threshold (m/N)")
+    ax.loglog(Ns, secs, "s-", label="randomised smoothing: seconds per gradient")
     ax.axhline(friction["bs_seconds_per_gradient"], color="C1", ls="--",
-               label="BS seconds per gradient (std 0)")  # fmt: skip
-    ax.set(xlabel="RS samples N", title="(b) sampling cost of randomised smoothing")
+               label="barrier smoothing: seconds per gradient (std 0)")  # fmt: skip
+    ax.set(xlabel="randomised-smoothing samples N",
+           title="(b) sampling cost of randomised smoothing")  # fmt: skip
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out / "rs_cost.png", dpi=120)

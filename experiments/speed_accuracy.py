@@ -25,7 +25,7 @@ Accuracy measures (all against the reference, on a common time grid every ``samp
   reference's (m);
 - ``final_error_m``: the same at the last time;
 - ``penetration_m``: the deepest penetration of any contact point over the run (m);
-- ``energy_error_J``: the largest |E(t) - E_ref(t)| over the grid, E kinetic plus potential (J);
+- ``energy_error_J``: the largest ``|E(t) - E_ref(t)|`` over the grid, E kinetic plus potential (J);
 - ``gradient_error``: ||G - G_ref|| / ||G_ref|| (Frobenius), G the derivatives of the final
   position with respect to two inputs (box: initial speed and push; ball: initial speed and
   height), ours by the engine's reverse pass, Drake's by AutoDiffXd. G_ref is the reference's
@@ -55,6 +55,9 @@ import numpy as np
 
 from drake_abs.contact.unconverged import UnconvergedStepError
 from drake_abs.experiments import drake_comparison as dc
+from drake_abs.experiments._common import file_list, progress, results_dir
+
+NAME = "speed-accuracy"
 
 _SPECIAL = {  # the inputs G differentiates with respect to, and the analytic slopes' entries
     "box": {"x0_columns": (3,), "push": True, "names": ("vx_0", "push"),
@@ -397,22 +400,27 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Run every setting on every scene; write summary.json, speed_accuracy.png and
     speed_accuracy.md to ``out`` (default results/speed-accuracy); return the summary."""
     config = config or Config()
-    out = Path(out or "results/speed-accuracy")
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(NAME, out)
     summary = {"config": asdict(config), "scenes": {}}
+    bar = progress(total=len(config.scenes) * (1 + len(settings(config))), desc=NAME)
     for scene in config.scenes:
+        bar.set_postfix_str(f"{scene}: reference")
         spec = scene_inputs(scene)
         try:
             xs_ref, G_ref, self_error = reference(scene, config, spec)
         except UnconvergedStepError as err:  # no truth to measure against: said, not hidden
             summary["scenes"][scene] = {"no_converged_reference": str(err)}
+            bar.update(1 + len(settings(config)))
             continue
+        bar.update()
         analytic = dc.analytic_gradients(scene, config.scene_config) if scene in _SPECIAL else {}
         measures = Measures(scene, config, xs_ref, G_ref, spec)
         x0, u, duration = _inputs(scene, config)
         rows = []
         for s in settings(config):
+            bar.set_postfix_str(f"{scene}: {s.label}")
             r = run_setting(scene, s, config, x0, u, duration, spec)
+            bar.update()
             rows.append({
                 "label": s.label, "family": s.family, "time_step": s.time_step, "value": s.value,
                 "cost_s_per_s": r["cost_s_per_s"],
@@ -437,6 +445,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             "rows": rows,
             "cheapest": cheapest(rows),
         }
+    bar.close()
+    summary["folder"] = str(out)
+    summary["files"] = file_list({
+        "summary": out / "summary.json", "markdown": out / "speed_accuracy.md",
+        "plot": out / "speed_accuracy.png",
+    })  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     (out / "speed_accuracy.md").write_text(report(summary))
     plot(summary, out / "speed_accuracy.png")
@@ -525,6 +539,10 @@ def plot(summary: dict, path: Path) -> None:
         ("trajectory_error_m", "cost_s_per_s", "trajectory error (m)"),
         ("gradient_error", "gradient_cost_s_per_s", "gradient error (relative)"),
     )
+    cost_labels = {
+        "cost_s_per_s": "cost of the rollout (s per simulated s)",
+        "gradient_cost_s_per_s": "cost with the gradient (s per simulated s)",
+    }
     fig, axes = plt.subplots(len(scenes), 2, figsize=(11, 4.2 * len(scenes)), squeeze=False)
     for i, scene in enumerate(scenes):
         for j, (err, cost, ylabel) in enumerate(measures):
@@ -537,7 +555,7 @@ def plot(summary: dict, path: Path) -> None:
                 ax.scatter([r[cost] for r in rows], [max(r[err], 1e-12) for r in rows],
                            s=20 + 1.2e4 * h, c=color, marker=marker, alpha=0.75,
                            label=_family_label(family))  # fmt: skip
-            ax.set(xscale="log", yscale="log", xlabel=f"{cost.replace('_', ' ')} (s per s)",
+            ax.set(xscale="log", yscale="log", xlabel=cost_labels[cost],
                    ylabel=ylabel, title=f"{scene}: {ylabel} against cost")  # fmt: skip
             ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             ax.grid(True, which="both", alpha=0.3)
@@ -547,5 +565,13 @@ def plot(summary: dict, path: Path) -> None:
     plt.close(fig)
 
 
+_FAMILY_LABELS = {
+    "exact": "ours, exact",
+    "bs": "ours, barrier smoothing",
+    "abs": "ours, adaptive (ABS), contact-aware",
+    "gaussian": "ours, adaptive (ABS), Gaussian-matched",
+}
+
+
 def _family_label(family: str) -> str:
-    return Setting(family, 0.01).label.rsplit(",", 1)[0]
+    return _FAMILY_LABELS.get(family) or Setting(family, 0.01).label.rsplit(",", 1)[0]

@@ -55,7 +55,8 @@ def MpcController_(T):
             spec: the QP data (prediction model, horizon, reference, bounds, slack penalty).
             theta: default theta (n_theta,).
             osqp_settings: overrides of OSQP's settings (see :class:`QpMpc`).
-            dual_tolerance: the active-set rule's multiplier threshold (see :mod:`qp_mpc`).
+            dual_tolerance: the active-set rule's multiplier threshold (see
+                :mod:`~drake_abs.mpc.qp_mpc`).
         """
 
         def _construct(

@@ -7,7 +7,8 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
-from drake_abs.multibody import PACKAGE_DIR, Scene
+from drake_abs.multibody import Scene
+from drake_abs.multibody.builder import resolve_model_file
 
 
 def with_mass(scene: Scene, body: str, factor: float, folder: Path) -> Scene:
@@ -15,7 +16,7 @@ def with_mass(scene: Scene, body: str, factor: float, folder: Path) -> Scene:
     mass and unit inertia held, as Drake's ``RigidBody::SetMass``), through a re-written SDF or
     URDF (elements ``<mass>0.2</mass>``, or attributes ``<mass value="0.2"/>``)."""
     spec = scene.models[0]
-    source = PACKAGE_DIR / spec.file.removeprefix("drake_abs:")
+    source = resolve_model_file(spec)
     text = source.read_text()
     link = re.search(rf'<link name="{body}">.*?</inertial>', text, flags=re.S)
     if source.suffix == ".urdf":

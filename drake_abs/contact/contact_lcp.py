@@ -148,7 +148,7 @@ class FrictionCone:
 
     @property
     def row_contact(self) -> np.ndarray:
-        """The contact each LCP row belongs to (d,): normal rows, then k tangent rows per
+        """The contact each LCP row belongs to, shape (d,); normal rows, then k tangent rows per
         frictional contact, then one cone row per frictional contact."""
         return self._row_contact
 

@@ -27,7 +27,7 @@ from drake_abs.lcp.ipm import (
 )
 from drake_abs.lcp.matrix_class import MatrixClass
 
-#: How a step differentiates a state-dependent mu: ``"total"`` (the default everywhere: the true
+#: How a step differentiates a state-dependent mu, ``"total"`` (the default everywhere: the true
 #: derivative of the step) or ``"frozen"`` (mu held constant, Zhang et al. 2023, Algorithm 1; biased
 #: where mu varies with the state, exact for Exact and Fixed smoothing).
 GradientMode = Literal["frozen", "total"]
@@ -245,10 +245,12 @@ class LCS:
             else:
                 jac["dmu_dx"], jac["dmu_du"] = dmu_dz @ self.D, dmu_dz @ self.E
             if parameters or smoothing_parameters:
-                names, dx_dt, dlam_dt = self._parameter_jacobians(
+                names, dx_dt, dlam_dt, dmu_dt = self._parameter_jacobians(
                     X, U, z, lcp, smoothing, dmu_dz, parameters, smoothing_parameters
                 )
-                jac.update(dx_dtheta=dx_dt, dimpulse_dtheta=dlam_dt, theta_names=names)
+                jac.update(
+                    dx_dtheta=dx_dt, dimpulse_dtheta=dlam_dt, dmu_dtheta=dmu_dt, theta_names=names
+                )
         out = Step(
             x_next=x_next,
             converged=lcp.converged,
@@ -307,9 +309,10 @@ class LCS:
             dz.append(np.zeros(dmu_s.shape))
             dmu.append(dmu_s)
         dz_all = np.concatenate(dz, axis=-1)
-        dlam = lcp.dlam_dq @ dz_all + lcp.dlam_dmu @ np.concatenate(dmu, axis=-1)
+        dmu_all = np.concatenate(dmu, axis=-1)
+        dlam = lcp.dlam_dq @ dz_all + lcp.dlam_dmu @ dmu_all
         dx = np.concatenate(direct, axis=-1) + self.C @ dlam
-        return tuple(names), dx, dlam
+        return tuple(names), dx, dlam, dmu_all
 
 
 @dataclass(frozen=True)
@@ -332,7 +335,7 @@ class LcsStepper:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
-        """The model parameters: every entry of the LCS's matrices (:attr:`LCS.parameter_names`)."""
+        """The model parameters, every entry of the LCS's matrices (:attr:`LCS.parameter_names`)."""
         return self.lcs.parameter_names
 
     def step(

@@ -73,7 +73,7 @@ class SmoothingPolicy(ABC):
 
     @property
     def is_constant(self) -> bool:
-        """True when mu does not depend on the state: ``frozen`` and ``total`` gradients
+        """True when mu does not depend on the state, where ``frozen`` and ``total`` gradients
         coincide."""
         return False
 
@@ -113,7 +113,8 @@ class SmoothingPolicy(ABC):
 
     def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         """Derivative of each contact's mu with respect to its own diagonal entry F_ii at fixed
-        z, (B, d); zero for policies that do not read F (only :class:`GaussianMatched` does)."""
+        z, (B, d); zero for policies that do not read F (only
+        :class:`~drake_abs.contact.smoothing.GaussianMatched` does)."""
         return np.zeros(z.shape)
 
 
@@ -310,6 +311,9 @@ class GaussianMatched(SmoothingPolicy):
         return np.where((kappa > 0) & (slack > 0), kappa * slack, 0.0)
 
     def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """(B, d, 3) with respect to (sigma, c1, c2). Where mu is clipped to 0 (kappa or the
+        matched slack not positive) the derivative is 0: at c1 = c2 = 0, far from contact
+        (kappa ~ 0), that is the one-sided derivative of a kink in (c1, c2)."""
         # d/dsigma of E[max(0, -(z + w))] and of E[max(0, z + w)] are both phi(z / sigma)
         Fd, t, kappa, slack = self._parts(z, F)
         pdf = _INV_SQRT_2PI * np.exp(-0.5 * t * t)

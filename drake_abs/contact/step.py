@@ -38,6 +38,7 @@ class Step:
             mode; None where the stepper does not form them).
         dx_dtheta, dimpulse_dtheta: (B, nx, T), (B, nc, T) derivatives with respect to the model
             parameters named by ``theta_names`` (None unless asked for).
+        dmu_dtheta: (B, nc, T) the same for mu, where the stepper forms it (an LCS does).
         theta_names: the T model parameters, in column order.
         friction_impulse: (B, nc, 3) tangential impulse in the world frame (N s), for a
             rigid-body scene (None otherwise).
@@ -61,6 +62,7 @@ class Step:
     dmu_du: np.ndarray | None = None
     dx_dtheta: np.ndarray | None = None
     dimpulse_dtheta: np.ndarray | None = None
+    dmu_dtheta: np.ndarray | None = None
     theta_names: tuple[str, ...] = ()
     friction_impulse: np.ndarray | None = None
     active: np.ndarray | None = None

@@ -7,7 +7,7 @@ Shapes are for a batch of M states: x (M, nx), u (M, nu), flat policy parameters
 - :class:`Policy`: ``u = pi(x; theta)`` with ``act``, ``jacobians`` and ``vjp``.
 - :class:`PullbackPolicy`: a policy whose vector-Jacobian product needs the work of its forward
   evaluation (an MPC's KKT system): ``pullback(theta, x) -> (u, vjp)``; the engine then keeps
-  ``vjp`` for the reverse pass instead of calling :meth:`Policy.vjp` again.
+  ``vjp`` for the reverse pass instead of calling ``Policy.vjp`` again.
 - :class:`Reward`: one sign convention for every objective: **rewards are maximised**. A cost
   (an MPC's tracking cost, a model-fitting loss) enters as its negative.
 """
@@ -25,7 +25,8 @@ from drake_abs.contact.step import Step
 @runtime_checkable
 class Stepper(Protocol):
     """A batched step ``x+ = f(x, u)``: an :class:`~drake_abs.contact.lcs.LcsStepper`, a
-    scene's ``ComplementarityStepper``, a ``QuadcopterStepper``, a :class:`LinearStepper`.
+    scene's ``ComplementarityStepper``, a ``QuadcopterStepper``, a
+    :class:`~drake_abs.engine.steppers.LinearStepper`.
 
     ``step(x (M, nx), u (M, nu), jacobians=True, parameters=False)`` returns a
     :class:`~drake_abs.contact.step.Step`; with ``jacobians`` it has ``dx_dx`` (M, nx, nx) and

@@ -61,7 +61,7 @@ Known limit, measured on 4000 random positive-definite problems (d = 2, eigenval
 at cond(F) = 1e8 and 1.9 to 2.4 % at 1e10 (cycling along F's near-null direction); with the
 second starts none fail at 1e8 and 0.02 % (1 in 5000) at 1e10, reported as not converged.
 
-Convergence of a problem means ``residual <= tol`` where, in the scaled variables,
+Convergence of a problem means ``residual <= tol`` where, in the scaled variables::
 
     residual = max( max_i |s_i - (F lam)_i - q_i| / (|q_i| + |s_i| + (|F| |lam|)_i),
                     max_i |lam_i s_i - mu_i| / (mu_i + gap_atol_i / tol) )
@@ -236,7 +236,7 @@ SECOND_START = True
 #: default; benchmarks and tests turn it off to measure the interior point alone. It runs only
 #: with ``SECOND_START``: turning the second starts off measures the default start alone.
 POLISH = True
-#: Pivot budget of each crossover attempt: ``PIVOTS_PER_CONTACT * d + PIVOTS_EXTRA``.
+#: Pivot budget of each crossover attempt, ``PIVOTS_PER_CONTACT * d + PIVOTS_EXTRA``.
 PIVOTS_PER_CONTACT = 4
 PIVOTS_EXTRA = 20
 #: Relative roundoff allowed in the crossover's sign test, per contact (times d, times eps).

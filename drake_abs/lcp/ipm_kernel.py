@@ -20,7 +20,7 @@ CONVERGED = int(LCPStatus.CONVERGED)
 MAX_ITERATIONS = int(LCPStatus.MAX_ITERATIONS)
 NUMERICAL_FAILURE = int(LCPStatus.NUMERICAL_FAILURE)
 
-#: Wide-neighbourhood constant: contacts still driving down keep lam_i s_i >= GAMMA * mean.
+#: Wide-neighbourhood constant; contacts still driving down keep lam_i s_i >= GAMMA * mean.
 GAMMA = 1e-3
 #: Step-length backtracking factors (neighbourhood and merit searches).
 BACKTRACK = np.array([1.0, 0.5, 0.25, 0.1, 0.03, 0.01])

@@ -35,7 +35,7 @@ gradient of norm ~600 moves theta by ~700 in the first step (measured: the total
 which satisfies (11a) and (11b) for gamma > 0.25. The literal reading is kept as
 :func:`step_size_as_printed`.
 
-Theta is a box |theta_i| <= bound (the paper does not state its compact convex set), so the
+Theta is a box ``|theta_i| <= bound`` (the paper does not state its compact convex set), so the
 projection is a clip.
 """
 
@@ -368,7 +368,7 @@ def graybox_optimize(
         rng: the source of the directions v_k (one drawn every iteration, also when eta = 1,
             so that methods run with the same seed see the same directions).
         delta: smoothing radius of eq. 9 (1e-4 in the paper).
-        bound: Theta = {|theta_i| <= bound}.
+        bound: ``Theta = {|theta_i| <= bound}``.
         alpha: step size alpha_k (default :func:`step_size`).
         progress: called with each iterate's record.
     """

@@ -47,7 +47,7 @@ no slack was positive (with positive slacks it was off by up to a few percent), 
 is the default.
 
 Active set, the documented deterministic rule for weakly active constraints: a row is active
-iff it is an equality row (the dynamics) or its multiplier is nonzero, |y_i| > tau with
+iff it is an equality row (the dynamics) or its multiplier is nonzero, ``|y_i| > tau`` with
 tau = ``dual_tolerance`` * max(1, ||y||_inf) (OSQP's sign of y_i says which bound: y_i > 0
 upper, y_i < 0 lower). A constraint that holds with equality but carries a zero multiplier
 (weakly active) is therefore treated as inactive: the Jacobian is that of the branch on which
@@ -65,10 +65,10 @@ u_max) (the reference input, e.g. hover, projected on the input box) with zero J
 status is in the record. The control is never NaN.
 
 Verification: OSQP's termination test is relative to the size of G z, so at an absurd (finite)
-state, |x| ~ 1e15, it reported SOLVED for an input 66 rad/s outside the hard box. Every solution
+state, ``|x| ~ 1e15``, it reported SOLVED for an input 66 rad/s outside the hard box. Every solution
 OSQP calls solved is therefore re-checked on the current data before it is used: all rows to
 OSQP's own primal criterion (eps_abs + eps_rel max(||G z||, ||l, u||)), and the input box rows at
-the scale of the input bounds alone (eps_abs + eps_rel max(1, |bound|), in the scaled inputs w),
+the scale of the input bounds alone (``eps_abs + eps_rel max(1, |bound|)``, in the scaled inputs w),
 both with a factor ``VERIFY_FACTOR`` = 10 of slack (unpolished solutions of the quadcopter reach
 about 1.1 times the tolerance). A solution that fails is FAILED (retried once from a cold start,
 then the fallback). A state whose prediction A (x - x_ref) reaches OSQP's infinity (1e30) cannot
@@ -128,6 +128,7 @@ USABLE = (MpcStatus.SOLVED, MpcStatus.SOLVED_INACCURATE)  # statuses whose solut
 OSQP_INFINITY = 1e30  # OSQP treats bounds of at least this magnitude as infinite
 VERIFY_FACTOR = 10.0  # slack on OSQP's tolerance when a returned solution is re-checked
 
+#: The OSQP settings every :class:`QpMpc` starts from (its ``osqp_settings`` override them).
 DEFAULT_OSQP_SETTINGS = {
     "eps_abs": 1e-6,
     "eps_rel": 1e-6,
@@ -324,7 +325,7 @@ class MpcSpec:
 
     @property
     def fallback_input(self) -> np.ndarray:
-        """The documented fallback control: u_ref projected on the input box."""
+        """The documented fallback control, u_ref projected on the input box."""
         return np.clip(self.u_ref, self.u_min, self.u_max)
 
 
@@ -336,13 +337,18 @@ class MpcSolution:
         u0: (nu,) control to apply (absolute units).
         status: :class:`MpcStatus`; ``fallback`` is True unless SOLVED or SOLVED_INACCURATE.
         fallback: whether u0 is the fallback control clip(u_ref, u_min, u_max).
-        iterations: OSQP ADMM iterations; polished: whether OSQP's polishing succeeded.
-        primal_residual, dual_residual: OSQP's residuals; objective: the QP's optimal value
-            (without the constant dx_0' Q dx_0); nan when not solved.
-        u_plan (N, nu), x_plan (N + 1, nx) (absolute, x_plan[0] = x), slack (N, n_c): the
-            predicted trajectory (None when not solved).
-        du0_dx (nu, nx), du0_dtheta (nu, n_theta): Jacobians (None unless requested; zero for a
-            fallback control).
+        iterations: OSQP ADMM iterations.
+        polished: whether OSQP's polishing succeeded.
+        primal_residual: OSQP's primal residual.
+        dual_residual: OSQP's dual residual.
+        objective: the QP's optimal value (without the constant dx_0' Q dx_0); nan when not solved.
+        u_plan: (N, nu) the predicted inputs, absolute (None when not solved).
+        x_plan: (N + 1, nx) the predicted states, absolute, ``x_plan[0] = x`` (None when not
+            solved).
+        slack: (N, n_c) the predicted trajectory's slacks (None when not solved).
+        du0_dx: (nu, nx) Jacobian of u0 (None unless requested; zero for a fallback control).
+        du0_dtheta: (nu, n_theta) Jacobian of u0 (None unless requested; zero for a fallback
+            control).
         active: number of active inequality rows; weakly_active: rows at a bound with a
             multiplier below the tolerance (treated as inactive).
     """

@@ -8,13 +8,14 @@ distance); arguments override a setting explicitly, nothing is copied by hand.
 
 from __future__ import annotations
 
+import difflib
 import functools
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.parsing import Parser
+from pydrake.multibody.parsing import PackageMap, Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
     ModelInstanceIndex,
@@ -72,26 +73,133 @@ def gymnasium_assets_dir() -> Path:
     if found is None or found.origin is None:
         raise FileNotFoundError(
             "gymnasium is not installed (pip install gymnasium): a model file "
-            "'gymnasium:<file>.xml' names one of its MuJoCo assets"
+            "'package://gymnasium/<file>.xml' names one of its MuJoCo assets"
         )
     return Path(found.origin).parent / "envs" / "mujoco" / "assets"
 
 
-def resolve_model_file(spec: ModelSpec) -> Path:
-    """The file a ModelSpec names: ``drake_abs:<path>`` (shipped with this package),
-    ``example-robot-data:<path>`` (under its ``robots/``), ``gymnasium:<file>`` (one of
-    gymnasium's MuJoCo assets, e.g. ``gymnasium:hopper.xml``) or a path."""
-    if spec.file.startswith("drake_abs:"):
-        path = PACKAGE_DIR / spec.file.split(":", 1)[1]
-    elif spec.file.startswith("example-robot-data:"):
-        path = example_robot_data_dir() / "robots" / spec.file.split(":", 1)[1]
-    elif spec.file.startswith("gymnasium:"):
-        path = gymnasium_assets_dir() / spec.file.split(":", 1)[1]
+#: The model-file prefixes of earlier versions, still read as aliases of ``package://`` URIs
+#: (``drake_abs:models/box.sdf`` is ``package://drake_abs/models/box.sdf``). Write the URI.
+MODEL_FILE_ALIASES = {
+    "drake_abs:": "package://drake_abs/",
+    "example-robot-data:": "package://example-robot-data/robots/",
+    "gymnasium:": "package://gymnasium/",
+}
+
+
+def model_file_url(file: str) -> str | None:
+    """The ``package://`` URI a scene's model ``file`` names (an alias of
+    :data:`MODEL_FILE_ALIASES` rewritten), or None when ``file`` is a path on disk."""
+    if file.startswith("package://"):
+        return file
+    for alias, prefix in MODEL_FILE_ALIASES.items():
+        if file.startswith(alias):
+            return prefix + file[len(alias) :]
+    return None
+
+
+def package_folders() -> dict[str, Path]:
+    """The packages a scene's ``package://<package>/<path>`` may name, name -> folder:
+    ``drake_abs`` (this package's folder: ``models/``, ``scenes/``); when installed,
+    ``example-robot-data`` (its share folder: ``robots/<robot>_description/...``) and each of its
+    robots' own ``<robot>_description`` folders, and ``gymnasium`` (its MuJoCo model files,
+    ``gymnasium/envs/mujoco/assets``; found without importing gymnasium)."""
+    folders = {"drake_abs": PACKAGE_DIR}
+    try:
+        robot_data = example_robot_data_dir()
+    except FileNotFoundError:
+        pass
     else:
-        path = Path(spec.file)
+        folders["example-robot-data"] = robot_data
+        for robot in sorted((robot_data / "robots").iterdir()):
+            if robot.is_dir():
+                folders.setdefault(robot.name, robot)
+    try:
+        assets = gymnasium_assets_dir()
+    except FileNotFoundError:
+        pass
+    else:
+        if assets.is_dir():
+            folders["gymnasium"] = assets
+    return folders
+
+
+def register_packages(package_map: PackageMap) -> None:
+    """Add every package of :func:`package_folders` that ``package_map`` lacks (the model files
+    name their meshes by ``package://`` URIs too; a package already there is left as it is)."""
+    for name, folder in package_folders().items():
+        if not package_map.Contains(name):
+            package_map.Add(name, str(folder))
+
+
+def model_file_problem(file: str) -> str | None:
+    """What is wrong with a scene's model ``file`` before any file is opened: None for a path
+    on disk or a ``package://`` URI (or alias) of a known package; otherwise the reason, naming
+    the expected form and the known packages."""
+    url = model_file_url(file)
+    if url is None:
+        return None
+    package, slash, rest = url.removeprefix("package://").partition("/")
+    if not package or not slash or not rest:
+        return f"{file!r} is not of the form package://<package>/<path>"
+    folders = package_folders()
+    if package in folders:
+        return None
+    top = ("drake_abs", "example-robot-data", "gymnasium")
+    known = ", ".join(n for n in top if n in folders)
+    robots = [n for n in folders if n not in top]  # example-robot-data's robots/ folders
+    if robots:
+        shown = ", ".join(robots[:4] + ["..."] + robots[-1:] if len(robots) > 6 else robots)
+        known += (
+            f", and the {len(robots)} robot packages of example-robot-data, the folders of "
+            f"{folders['example-robot-data'] / 'robots'} ({shown})"
+        )
+    close = difflib.get_close_matches(package, list(folders), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    missing = [
+        f"{name} is not installed (pip install {name})"
+        for name in ("example-robot-data", "gymnasium")
+        if name not in folders
+    ]
+    missing_text = f"; {'; '.join(missing)}" if missing else ""
+    return (
+        f"unknown package {package!r} in {file!r}{hint}; a model file is "
+        f"package://<package>/<path> with a known package: {known}{missing_text}"
+    )
+
+
+def resolve_package_file(file: str, where: str = "", what: str = "model file") -> Path:
+    """The file ``file`` names: ``package://<package>/<path>``, resolved through Drake's
+    ``PackageMap`` with the packages of :func:`package_folders` (for example
+    ``package://drake_abs/models/box_planar.sdf``,
+    ``package://example-robot-data/robots/go1_description/urdf/go1.urdf``,
+    ``package://gymnasium/hopper.xml``), an alias of one (:data:`MODEL_FILE_ALIASES`), or a path
+    on disk. ``ValueError`` (prefixed with ``where``) for an unknown package,
+    ``FileNotFoundError`` for a missing file (``what``: the kind of file, for the message)."""
+    url = model_file_url(file)
+    if url is None:
+        path = Path(file).expanduser()
+    else:
+        problem = model_file_problem(file)
+        if problem is not None:
+            raise ValueError(f"{where}: {problem}" if where else problem)
+        package, _, rest = url.removeprefix("package://").partition("/")
+        folder = package_folders()[package]
+        package_map = PackageMap.MakeEmpty()
+        package_map.Add(package, str(folder))
+        try:
+            path = Path(package_map.ResolveUrl(url))
+        except RuntimeError:  # Drake's: the URI resolves to a file that does not exist
+            path = folder / rest
     if not path.is_file():
-        raise FileNotFoundError(f"model file {spec.file!r} not found (looked at {path})")
+        raise FileNotFoundError(f"{what} {file!r} not found (looked at {path})")
     return path
+
+
+def resolve_model_file(spec: ModelSpec, where: str = "") -> Path:
+    """The model file a ModelSpec names (see :func:`resolve_package_file`); ``where`` (such as
+    ``"scene 'box_push': models[0].file"``) prefixes the message of an unknown package."""
+    return resolve_package_file(spec.file, where)
 
 
 @dataclass(frozen=True)
@@ -187,15 +295,11 @@ def add_scene_models(
     leaves the files' collision geometry out (and draws STL visuals through OBJ copies; see
     :mod:`drake_abs.multibody.model_files`)."""
     parser = parser or Parser(plant)
-    if any(m.file.startswith("example-robot-data:") for m in scene.models):
-        parser.package_map().Add("example-robot-data", str(example_robot_data_dir()))
-        robots = example_robot_data_dir() / "robots"
-        for package in robots.iterdir():  # URDFs refer to package://<robot>_description/...
-            if package.is_dir() and not parser.package_map().Contains(package.name):
-                parser.package_map().Add(package.name, str(package))
+    register_packages(parser.package_map())  # the files' own package:// URIs (meshes)
     for i, spec in enumerate(scene.models):
         where = f"scene {scene.name!r}: models[{i}]"
-        instances = _parse(parser, resolve_model_file(spec), collisions, spec, where)
+        path = resolve_model_file(spec, where=f"{where}.file")
+        instances = _parse(parser, path, collisions, spec, where)
         instance = instances[0]
         if spec.name:
             plant.RenameModelInstance(instance, spec.name)
@@ -206,7 +310,7 @@ def add_scene_models(
     add_floating_base_chains(plant)
 
 
-#: The joints of a floating base, parent to child: q = (x, y, z, yaw, pitch, roll) and v their
+#: The joints of a floating base, parent to child, with q = (x, y, z, yaw, pitch, roll) and v their
 #: rates, with the body's pose p = (x, y, z), R = Rz(yaw) Ry(pitch) Rx(roll).
 FLOATING_BASE_JOINTS = (
     ("x", PrismaticJoint, (1.0, 0.0, 0.0)),

@@ -116,7 +116,7 @@ class ContactModelBase(ABC):
             plant.num_velocities(),
             plant.num_actuators(),
         )
-        #: where each free body's unit quaternion (qw, qx, qy, qz) starts in q: the stepper
+        #: where each free body's unit quaternion (qw, qx, qy, qz) starts in q; the stepper
         #: keeps these at unit norm (see :mod:`drake_abs.multibody.floating`)
         self.quaternion_starts = quaternion_starts(plant)
 

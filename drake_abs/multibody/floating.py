@@ -6,7 +6,7 @@ has no singular orientation, unlike Euler angles. The step's position update
 ``q+ = q + h N(q) v+`` moves a unit quaternion along its tangent, so its norm grows by about
 ``h^2 |w|^2 / 8`` per step: after the update each quaternion block is projected back onto the
 unit sphere, ``P(q) = q / |q|``, and the step's Jacobians are chained through the projection's
-Jacobian ``dP = (I - u u^T) / |q|`` (u = q / |q|) so that they stay the derivatives of the map
+Jacobian ``dP = (I - u u^T) / |q|`` (``u = q / |q|``) so that they stay the derivatives of the map
 the step computes.
 """
 

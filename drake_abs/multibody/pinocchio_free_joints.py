@@ -21,7 +21,7 @@ Derivatives: pinocchio differentiates with respect to a tangent increment d of i
 Drake's q is the increment ``d = D(q) dq``: ``dp = R^T dp_FM`` and, for the quaternion e of any
 norm, ``dtheta = (2 / |e|^2) vec(conj(e) (x) de)``. That is how Drake's own AutoDiffXd
 derivatives extend the quaternion off the unit sphere: its rotation is ``R(e / |e|)``, so every
-quantity but N depends on e / |e| alone (the radial direction de = e gives d = 0), while N is
+quantity but N depends on ``e / |e|`` alone (the radial direction de = e gives d = 0), while N is
 linear in the unnormalized e (so dN is constant). T depends on q through R: moving Drake's
 quaternion coordinate k changes it by ``dT_k = -S_k T``, where S_k applies ``dtheta_k x`` to
 each 3-vector of the joint's block (``dtheta_k = D[t+3:t+6, k]``).
@@ -55,7 +55,7 @@ class FreeJointCoordinates:
         ]
         #: the 1-dof joints' position and velocity indices (N, D and T are 1 there)
         self._single = np.array(single, dtype=np.int64).reshape(-1, 2)
-        #: dN/dq (nq, nv, nq): constant, N being linear in the quaternions
+        #: dN/dq (nq, nv, nq), constant, N being linear in the quaternions
         self.dN = np.zeros((self.nq, self.nv, self.nq))
         for s, t in free:
             for m in range(4):

@@ -85,7 +85,7 @@ def standing_controller(
     return u, u_ff
 
 
-#: a trot-like swing of solo12's reference (per leg HAA, HFE, KFE; legs FL, FR, HL, HR): hip and
+#: a trot-like swing of solo12's reference (per leg HAA, HFE, KFE; legs FL, FR, HL, HR); hip and
 #: knee pitch swung by 0.3 rad, diagonal legs together (phases 0 and pi), at 2 Hz
 SOLO12_TROT: tuple[np.ndarray, np.ndarray, float] = (
     np.tile([0.0, 0.3, 0.3], 4),

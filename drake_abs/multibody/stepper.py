@@ -10,6 +10,7 @@ applies every setting the scene names.
 
 from __future__ import annotations
 
+import copy
 import warnings
 from dataclasses import replace
 
@@ -109,6 +110,23 @@ class ComplementarityStepper:
             + tuple(f"friction[{i}]" for i in np.flatnonzero(~np.isnan(coeff)))
             + tuple(f"mass[{name}]" for name in self.model.massive_bodies)
         )
+
+    def with_smoothing(self, smoothing: SmoothingPolicy) -> ComplementarityStepper:
+        """The same stepper with another smoothing policy (larger mu: more smoothing)."""
+        if not isinstance(smoothing, SmoothingPolicy):
+            raise ValueError(f"smoothing must be a SmoothingPolicy; got {type(smoothing).__name__}")
+        other = copy.copy(self)
+        other.smoothing = smoothing
+        return other
+
+    def parameter_values(self) -> np.ndarray:
+        """The values of :attr:`parameter_names` in this stepper's model (T,): the ground
+        height (m), the friction coefficients, the masses (kg)."""
+        m = self.model
+        coeff = m.cone.coefficients
+        ctx = m.plant.CreateDefaultContext()
+        masses = [m.plant.get_body(index).get_mass(ctx) for _, index in m._massive]
+        return np.concatenate([[m.ground.height], coeff[~np.isnan(coeff)], masses]).astype(float)
 
     @property
     def smoothing_parameter_names(self) -> tuple[str, ...]:

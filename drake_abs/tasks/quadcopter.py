@@ -107,8 +107,8 @@ class QuadcopterParams:
 class QuadcopterConstraints:
     """The state and input constraints of Zuliani et al. 2025, section 7 (boxes).
 
-    Rotor speeds in [0, 630] rad/s; |v_x|, |v_y|, |v_z| <= 2 m/s; |phi|, |theta|, |psi| <= pi/4;
-    |p|, |q|, |r| <= pi/8 rad/s; positions unconstrained.
+    Rotor speeds in [0, 630] rad/s; ``|v_x|, |v_y|, |v_z| <= 2`` m/s;
+    ``|phi|, |theta|, |psi| <= pi/4``; ``|p|, |q|, |r| <= pi/8`` rad/s; positions unconstrained.
     """
 
     rotor_speed_max: float = 630.0  # rad/s

@@ -47,8 +47,8 @@ def test_lcs_diagram_gradient_equals_the_batched_engine(policy, smoothing, gradi
     )
     assert engine.x[0, :, 1].min() < 0.01  # it hits the ground
     pd = build_policy_diagram(
-        LcsPlant(lcs, H_STEP, smoothing, gradient), policy, reward, theta, noise, H_STEP,
-        sigma=0.5, input_port="u",
+        LcsPlant(lcs, smoothing, gradient), policy, reward, theta, noise, H_STEP,
+        sigma=0.5, input_port="actuation",
     )  # fmt: skip
     r = rollout_return(pd, theta, x0)
     J, grad = r.value, r.gradient
@@ -114,8 +114,8 @@ def _ball_loop(lcs, theta_scale=0.2, horizon=30, rng=None):
     theta = theta_scale * rng.standard_normal(policy.n_params)
     noise = rng.standard_normal((horizon, 2))
     pd = build_policy_diagram(
-        LcsPlant(lcs, H_STEP, ContactAware(1e-2, 0.1)), policy, ball_reward(), theta, noise,
-        H_STEP, sigma=0.5, input_port="u",
+        LcsPlant(lcs, ContactAware(1e-2, 0.1)), policy, ball_reward(), theta, noise,
+        H_STEP, sigma=0.5, input_port="actuation",
     )  # fmt: skip
     return pd, theta, np.array([0.0, 0.3, 1.0, -1.0])
 
@@ -130,7 +130,7 @@ def test_no_silent_results_on_the_diagram_path():
 
     lcs = point_mass_lcs(2, time_step=H_STEP)
     with pytest.raises(ValueError, match="H >= 1"):
-        build_policy_diagram(LcsPlant(lcs, H_STEP), LinearPolicy(4, 2), ball_reward(),
+        build_policy_diagram(LcsPlant(lcs), LinearPolicy(4, 2), ball_reward(),
                              np.zeros(10), np.zeros((0, 2)), H_STEP)  # fmt: skip
     pd, theta, x0 = _ball_loop(lcs)
     r = rollout_return(pd, theta, x0)

@@ -4,8 +4,8 @@
 from drake_abs.experiments.box_convergence import Config, report, run
 
 
-def test_sweep_runs_the_extremes_without_nan_and_reports_failures():
-    summary = run(Config.test_size())  # raises on any non-finite state or Jacobian
+def test_sweep_runs_the_extremes_without_nan_and_reports_failures(tmp_path):
+    summary = run(Config.test_size(), tmp_path)  # raises on any non-finite state or Jacobian
     assert summary["steps"] == 48 * 12
     text = report(summary)
     assert f"{summary['converged_steps']} of {summary['steps']} steps converged" in text
@@ -13,9 +13,11 @@ def test_sweep_runs_the_extremes_without_nan_and_reports_failures():
         assert f"h {case['time_step']:g}" in text
     frictionless = [r for r in summary["rows"] if r["friction"] == 0.0]
     assert all(r["converged_steps"] == r["steps"] for r in frictionless)
+    assert summary["files"] == {"summary": str((tmp_path / "summary.json").resolve())}
+    assert (tmp_path / "summary.json").is_file()
 
 
-def test_exact_contact_converges_over_the_whole_grid_for_friction_up_to_one():
+def test_exact_contact_converges_over_the_whole_grid_for_friction_up_to_one(tmp_path):
     """Exact contact, friction up to 1: every step converges at every time step (1e-4 to 5e-2),
     mass and mobility ratio (the full sweep: 0 failures in 9 600 steps)."""
     config = Config(
@@ -26,11 +28,11 @@ def test_exact_contact_converges_over_the_whole_grid_for_friction_up_to_one():
         steps=12,
         policies=("exact",),
     )
-    summary = run(config)
+    summary = run(config, tmp_path)
     assert summary["failed_cases"] == [], report(summary)
 
 
-def test_abs_converges_at_ordinary_time_steps():
+def test_abs_converges_at_ordinary_time_steps(tmp_path):
     """ABS, friction up to 1, h = 1e-2 over extreme mass and mobility ratios: every step
     converges (the full sweep: 0 failures in 4 800 steps at h >= 1e-2; its failures are at
     h = 1e-4, reported in the closing notes)."""
@@ -42,5 +44,5 @@ def test_abs_converges_at_ordinary_time_steps():
         steps=12,
         policies=("abs",),
     )
-    summary = run(config)
+    summary = run(config, tmp_path)
     assert summary["failed_cases"] == [], report(summary)

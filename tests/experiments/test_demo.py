@@ -1,12 +1,13 @@
 """The README's main job at a reduced size: files written, plots not blank, physics sensible."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from drake_abs.experiments.bouncing_ball import Config, run
+from drake_abs.experiments.bouncing_ball import Config, frame_camera, report, run
 from drake_abs.experiments.cli import main
 
 
@@ -24,6 +25,47 @@ def test_demo_writes_every_file(demo):
     html = (out / "bouncing_ball.html").read_text()
     assert len(html) > 100_000 and "meshcat" in html.lower()
     assert json.loads((out / "summary.json").read_text())["cases"].keys() == summary["cases"].keys()
+    for path in summary["files"].values():  # absolute paths, in the results folder
+        assert Path(path).is_absolute() and Path(path).parent == out.resolve()
+
+
+def test_demo_says_what_to_look_at(demo):
+    out, summary = demo
+    text = report(summary)
+    guide = text.split("What to look at")[1]
+    for key in ("vy_vs_x", "dvy_dx", "step_jacobian", "contact_impulse", "meshcat_html"):
+        assert summary["files"][key] in guide  # every file, by its absolute path
+    assert "exact" in guide and "barrier smoothing" in guide and "ABS" in guide
+    assert "-g / v_x = -9.81" in guide and "1/h = 100" in guide
+    for mark in ("`", "**", ":func:", "Fixed(", "ContactAware("):
+        assert mark not in text
+
+
+def test_legends_are_readable_names():
+    labels = Config().labels()
+    assert labels["exact"] == "exact"
+    assert labels["bs_mu=0.001"] == "barrier smoothing, mu = 0.001"
+    assert labels["abs_contact_aware"] == "adaptive (ABS), contact-aware"
+    assert set(labels) == set(Config().cases())
+    for label in labels.values():
+        assert "(" not in label.replace("(ABS)", "") and "_" not in label, label
+
+
+def test_meshcat_camera_looks_at_the_balls():
+    class FakeMeshcat:
+        def SetCameraPose(self, camera, target):
+            self.camera, self.target = np.asarray(camera), np.asarray(target)
+
+    config = Config()
+    meshcat = FakeMeshcat()
+    frame_camera(meshcat, config)
+    reach = config.speed * config.duration
+    # the target is inside the region the balls fly through (x along the throw, z up)
+    assert 0 < meshcat.target[0] < reach and 0 < meshcat.target[2] < config.height
+    assert abs(meshcat.target[1]) < 0.1
+    distance = np.linalg.norm(meshcat.camera - meshcat.target)
+    assert 1.0 < distance < 4.0  # close enough to see the balls, far enough to see the throw
+    assert meshcat.camera[1] < meshcat.target[1]  # from the front (the balls spread along y)
 
 
 def test_demo_physics(demo):
@@ -42,5 +84,7 @@ def test_demo_physics(demo):
 
 def test_cli_without_meshcat(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--duration", "0.2", "--no-meshcat"]) == 0
-    assert "results written to" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert f"results written to {tmp_path.resolve()}" in text
+    assert "What to look at" in text and str(tmp_path.resolve() / "dvy_dx.png") in text
     assert (tmp_path / "vy_vs_x.png").exists() and not (tmp_path / "bouncing_ball.html").exists()

@@ -13,8 +13,8 @@ from drake_abs.experiments.mujoco_comparison import Config, report, run  # noqa:
 
 
 @pytest.fixture(scope="module")
-def summary():
-    return run(Config.test_size())
+def summary(tmp_path_factory):
+    return run(Config.test_size(), tmp_path_factory.mktemp("mujoco"))
 
 
 def _scene(summary, name):

@@ -1,8 +1,11 @@
-"""The scene recordings' rollouts (issue 14, item 4) do what the physics says, without writing
-pages (the pages themselves are checked in a browser in tests/diagrams/test_meshcat_render.py):
+"""The scene recordings' rollouts (issue 14, item 4) do what the physics says (the pages are
+written to a temporary folder; they are checked in a browser in
+tests/diagrams/test_meshcat_render.py):
 the robots land and stand on their feet, Solo12's stepping moves its feet, and the pushed box
 behaves as quasi-static pushing predicts (a push through the centre line translates it, a push
 to one side turns it away from that side, and the mirrored push mirrors the motion)."""
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,9 +14,14 @@ from drake_abs.experiments.scene_recordings import Config, report, rollout, run
 
 
 @pytest.fixture(scope="module")
-def legged():
+def legged(tmp_path_factory):
     names = ("solo12_standing", "solo12_stepping", "go1_standing")
-    return {r["recording"]: r for r in run(Config(duration=1.0, recordings=names))["rows"]}
+    out = tmp_path_factory.mktemp("recordings")
+    summary = run(Config(duration=1.0, recordings=names), out)
+    assert set(summary["files"]) == {*names, "summary"}
+    for path in summary["files"].values():  # absolute paths of written files
+        assert Path(path).is_absolute() and Path(path).is_file()
+    return {r["recording"]: r for r in summary["rows"]}
 
 
 def test_quadrupeds_land_and_stand(legged):
@@ -38,10 +46,11 @@ def test_stepping_moves_the_feet_where_standing_holds_them():
     assert spread[0] < 5e-3 < spread[1], spread  # feet lift (m) only when stepping
 
 
-def test_pushed_box_follows_quasi_static_pushing():
+def test_pushed_box_follows_quasi_static_pushing(tmp_path):
     rows = {}
     for offset in (0.0, 0.05, -0.05):
-        summary = run(Config(duration=1.5, recordings=("pusher_box",), push_offset=offset))
+        config = Config(duration=1.5, recordings=("pusher_box",), push_offset=offset)
+        summary = run(config, tmp_path / f"offset_{offset:g}")
         rows[offset] = summary["rows"][0]
         assert rows[offset]["unconverged_steps"] == 0
     centre, left, right = rows[0.0], rows[0.05], rows[-0.05]
@@ -64,6 +73,7 @@ def test_pushed_box_follows_quasi_static_pushing():
         (Config(recordings=("hopper_x",)), "recordings"),
     ],
 )
-def test_bad_configs_are_refused_by_name(config, match):
+def test_bad_configs_are_refused_by_name(config, match, tmp_path):
     with pytest.raises(ValueError, match=match):
-        run(config)
+        run(config, tmp_path / "out")
+    assert not (tmp_path / "out").exists()  # refused before anything is written

@@ -23,7 +23,7 @@ from drake_abs import ContactAware, Exact, Fixed
 from drake_abs.contact.contact_lcp import contact_step
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody import ComplementarityStepper
-from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model, resolve_model_file
 from drake_abs.multibody.posture import STANDING_GAINS, standing_controller, total_mass
 from drake_abs.multibody.scene import Scene
 
@@ -66,6 +66,15 @@ def test_every_shipped_scene_loads_and_builds():
         assert sm.q0.shape == (nq,) and sm.v0.shape == (nv,)
         # nothing starts below the ground
         assert sm.contact_model.distances(sm.q0[None]).min() > -1e-12
+
+
+def test_shipped_scenes_name_their_model_files_by_package_uri():
+    """The shipped scenes show the form to use: ``package://<package>/<path>`` (the older
+    ``drake_abs:`` ... prefixes are aliases), each resolving to an installed file."""
+    for name in SIZES:
+        for i, spec in enumerate(Scene.load(name).models):
+            assert spec.file.startswith("package://"), (name, i, spec.file)
+            assert resolve_model_file(spec).is_file()
 
 
 def test_solo12_is_the_floating_example_robot_data_robot_with_twelve_actuators():

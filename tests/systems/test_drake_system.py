@@ -33,10 +33,12 @@ def simulate_double(diagram, x0, n, plant_name="lcs"):
 
 def test_plant_converts_to_autodiff_and_keeps_its_parameters():
     lcs = point_mass_lcs(2, time_step=H)
-    plant = LcsPlant(lcs, H, Fixed(1e-3), "total")
+    plant = LcsPlant(lcs, Fixed(1e-3), "total")
     ad = plant.ToAutoDiffXd()
     assert ad.lcs is lcs and ad.smoothing == Fixed(1e-3) and ad.gradient == "total"
-    assert [ad.get_output_port(i).get_name() for i in range(3)] == ["state", "lam", "mu"]
+    names = [ad.get_output_port(i).get_name() for i in range(ad.num_output_ports())]
+    assert names == ["state", "impulse", "mu", "converged"]
+    assert [ad.get_input_port(i).get_name() for i in range(ad.num_input_ports())] == ["actuation"]
 
 
 @pytest.mark.parametrize(
@@ -50,7 +52,7 @@ def test_diagram_gradient_matches_chain_rule_and_finite_differences(policy, grad
     x0 = np.array([0.0, 0.25, 1.0, 0.3])  # thrown up, lands around step 30
     u = np.array([0.2, -1.0])
     n = 45
-    diagram = make_lcs_diagram(lcs, H, policy, gradient=gradient, u=u)
+    diagram = make_lcs_diagram(lcs, policy, gradient=gradient, u=u)
     g = simulate_with_gradient(diagram, x0, n)
     core = open_loop(LcsStepper(lcs, policy, gradient), x0, np.tile(u, (n, 1)))
     assert core.converged.all()
@@ -70,7 +72,7 @@ def test_gradient_with_respect_to_the_input_port():
     x0 = np.array([0.0, 0.2, 1.0, 0.0])
     u = np.array([0.5, -2.0])
     n = 30
-    diagram = make_lcs_diagram(lcs, H, Fixed(1e-4))  # input port exported
+    diagram = make_lcs_diagram(lcs, Fixed(1e-4))  # input port exported
     ad = diagram.ToAutoDiffXd()
     simulator = Simulator_[AutoDiffXd](ad)
     context = simulator.get_mutable_context()
@@ -96,34 +98,43 @@ def test_gradient_with_respect_to_the_input_port():
     np.testing.assert_allclose(grad, fd, atol=1e-6 * (1 + np.abs(fd).max()))
 
 
-def test_lam_and_mu_ports_carry_the_last_step():
+def test_impulse_and_mu_ports_carry_the_last_step():
     lcs = point_mass_lcs(1, time_step=H)
-    diagram = make_lcs_diagram(lcs, H, Fixed(1e-8), u=np.zeros(1))
+    diagram = make_lcs_diagram(lcs, Fixed(1e-8), u=np.zeros(1))
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     plant = diagram.GetSubsystemByName("lcs")
     plant_context = plant.GetMyMutableContextFromRoot(context)
     plant.SetInitialState(plant_context, np.array([0.0, 0.0]))  # resting on the ground
     simulator.AdvanceTo(10 * H)
-    lam = plant.lam_port.Eval(plant_context)
+    lam = plant.impulse_port.Eval(plant_context)
     mu = plant.mu_port.Eval(plant_context)
     assert lam[0] == pytest.approx(9.81 * H, rel=1e-3)  # the impulse that holds the ball up
     assert mu[0] == pytest.approx(1e-8, rel=1e-9)
 
 
 def test_bad_construction_arguments():
+    """The time step has one source, the LCS: passing it again is refused by name, as is an
+    LCS without one."""
     lcs = point_mass_lcs(2)
-    with pytest.raises(ValueError, match="time_step must be a finite number > 0"):
-        LcsPlant(lcs, -1.0)
+    with pytest.raises(ValueError, match=r"smoothing must be a SmoothingPolicy.*lcs.time_step"):
+        LcsPlant(lcs, 0.02)
     with pytest.raises(ValueError, match="gradient must be 'frozen' or 'total'"):
-        LcsPlant(lcs, H, None, "full")
+        LcsPlant(lcs, None, "full")
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match=r"lcs.time_step is None"):
+        LcsPlant(replace(lcs, time_step=None))
+    with pytest.raises(ValueError, match=r"LCS.time_step must be a finite number > 0"):
+        replace(lcs, time_step=-1.0)
+    assert LcsPlant(point_mass_lcs(2, time_step=0.02)).time_step == 0.02
 
 
 def test_mismatched_derivative_widths_raise():
     """x seeded with 4 derivatives and u with 2 cannot be combined: Drake's convention is to
     throw, and so does the plant, instead of silently dropping u's derivatives."""
     lcs = point_mass_lcs(2, time_step=H)
-    ad = make_lcs_diagram(lcs, H, Fixed(1e-4)).ToAutoDiffXd()
+    ad = make_lcs_diagram(lcs, Fixed(1e-4)).ToAutoDiffXd()
     context = ad.CreateDefaultContext()
     plant = ad.GetSubsystemByName("lcs")
     x0 = np.array([0.0, 0.2, 1.0, 0.0])
@@ -132,7 +143,7 @@ def test_mismatched_derivative_widths_raise():
     )
     ad.get_input_port(0).FixValue(context, InitializeAutoDiff(np.zeros((2, 1))).ravel())
     with pytest.raises(ValueError, match="derivative vectors of different lengths"):
-        ad.EvalUniquePeriodicDiscreteUpdate(context)
+        Simulator_[AutoDiffXd](ad, context).AdvanceTo(0.5 * H)
 
 
 def _one_autodiff_step(plant, x0, u):
@@ -141,7 +152,9 @@ def _one_autodiff_step(plant, x0, u):
     simulator = Simulator_[AutoDiffXd](ad)
     context = simulator.get_mutable_context()
     ad.SetInitialState(context, InitializeAutoDiff(x0.reshape(-1, 1)).ravel())
-    ad.u_port.FixValue(context, InitializeAutoDiff(u.reshape(-1, 1), np.zeros((2, 4))).ravel())
+    ad.actuation_port.FixValue(
+        context, InitializeAutoDiff(u.reshape(-1, 1), np.zeros((2, 4))).ravel()
+    )
     simulator.AdvanceTo(0.5 * H)  # the update at t = 0 only
     (x,), (g,) = autodiff.split([ad.state_port.Eval(context)])
     return x, g, ad.converged_port.Eval(context)[0].value()
@@ -161,20 +174,20 @@ def test_unconverged_step_derivatives_are_dropped_flagged_or_raised(monkeypatch)
     good = point_mass_lcs(2, time_step=H)
     starved = replace(good, solver_options={**good.solver_options, "max_iterations": 2})
     x0, u = np.array([0.0, 0.01, 1.0, -1.0]), np.zeros(2)
-    x, g, ok = _one_autodiff_step(LcsPlant(good, H, ContactAware(1e-2, 0.05), "total"), x0, u)
+    x, g, ok = _one_autodiff_step(LcsPlant(good, ContactAware(1e-2, 0.05), "total"), x0, u)
     assert ok == 1.0 and np.isfinite(g).all()
     with pytest.warns(LCPConvergenceWarning), pytest.warns(UnconvergedStepWarning, match="drop"):
-        x2, g2, ok2 = _one_autodiff_step(LcsPlant(starved, H, ContactAware(1e-2, 0.05)), x0, u)
+        x2, g2, ok2 = _one_autodiff_step(LcsPlant(starved, ContactAware(1e-2, 0.05)), x0, u)
     assert ok2 == 0.0 and np.isnan(g2).all() and np.isfinite(x2).all()
-    plant = LcsPlant(starved, H, ContactAware(1e-2, 0.05), on_unconverged="flag")
+    plant = LcsPlant(starved, ContactAware(1e-2, 0.05), on_unconverged="flag")
     assert plant.ToAutoDiffXd().on_unconverged == "flag"
     with pytest.warns(LCPConvergenceWarning), pytest.warns(UnconvergedStepWarning, match="kept"):
         _, g3, ok3 = _one_autodiff_step(plant, x0, u)
     assert ok3 == 0.0 and np.isfinite(g3).all()
     with pytest.warns(LCPConvergenceWarning), pytest.raises(UnconvergedStepError):
-        _one_autodiff_step(LcsPlant(starved, H, on_unconverged="raise"), x0, u)
+        _one_autodiff_step(LcsPlant(starved, on_unconverged="raise"), x0, u)
     with pytest.raises(ValueError, match="on_unconverged"):
-        LcsPlant(good, H, on_unconverged="ignore")
+        LcsPlant(good, on_unconverged="ignore")
 
 
 def test_default_derivative_is_the_true_one_everywhere():
@@ -198,10 +211,10 @@ def test_default_derivative_is_the_true_one_everywhere():
     lcs = point_mass_lcs(2, time_step=H)
     x0 = np.array([0.0, 0.25, 1.0, 0.3])
     n, policy = 45, ContactAware(1e-2, 0.05, 1e-9)
-    diagram = make_lcs_diagram(lcs, H, policy, u=np.array([0.2, -1.0]))
+    diagram = make_lcs_diagram(lcs, policy, u=np.array([0.2, -1.0]))
     g = simulate_with_gradient(diagram, x0, n)
     fd = central_difference(lambda x: simulate_double(diagram, x, n), x0, eps=1e-7)
     np.testing.assert_allclose(g.dx_final_dx0, fd, atol=1e-5 * (1 + np.abs(fd).max()))
-    frozen = simulate_with_gradient(make_lcs_diagram(lcs, H, policy, gradient="frozen",
+    frozen = simulate_with_gradient(make_lcs_diagram(lcs, policy, gradient="frozen",
                                                      u=np.array([0.2, -1.0])), x0, n)  # fmt: skip
     assert np.abs(frozen.dx_final_dx0 - fd).max() > 1e-3 * (1 + np.abs(fd).max())  # biased
