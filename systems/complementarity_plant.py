@@ -14,13 +14,12 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_abs.contact.unconverged import UnconvergedPolicy, check_unconverged_policy
 from drake_abs.multibody.stepper import ComplementarityStepper
-from drake_abs.systems import autodiff
-from drake_abs.systems.plant_ports import PlantPorts
+from drake_abs.systems.plant_base import ComplementarityPlantBase
 
 
 @TemplateSystem.define("ComplementarityPlant_", T_list=[float, AutoDiffXd])
 def ComplementarityPlant_(T):
-    class Impl(LeafSystem_[T]):
+    class Impl(ComplementarityPlantBase, LeafSystem_[T]):
         """A MultibodyPlant with complementarity contact, stepped every ``time_step`` seconds
         (the scene's, ``stepper.model.h``).
 
@@ -88,25 +87,16 @@ def ComplementarityPlant_(T):
             self.on_unconverged = on_unconverged
             self.stepper = stepper
             self.time_step = stepper.model.h
-            self._model_values = stepper.parameter_values()
-            self._variants = {}
             nq, nv, nu, nc = stepper.sizes
             if initial_state is None:  # the model files' default positions, at rest
                 plant = stepper.model.plant
                 q0 = plant.GetPositions(plant.CreateDefaultContext())
                 initial_state = np.concatenate([q0, np.zeros(nv)])
             self.initial_state = np.asarray(initial_state, dtype=float)
-            self.ports = PlantPorts(
-                self, T, nq + nv, nu, nc, self.initial_state, stepper.smoothing.parameter_values(),
-                self._model_values, self.time_step, self._Update,
+            self._declare_plant(
+                T, nq + nv, nu, nc, self.initial_state, stepper.smoothing.parameter_values(),
+                stepper.parameter_values(), self.time_step,
             )  # fmt: skip
-            self.actuation_port = self.ports.actuation_port
-            self.state_port = self.ports.state_port
-            self.impulse_port = self.ports.impulse_port
-            self.mu_port = self.ports.mu_port
-            self.converged_port = self.ports.converged_port
-            self.smoothing_parameter_index = self.ports.smoothing
-            self.model_parameter_index = self.ports.model
             self._geometry = _geometry
             if scene_graph is not None:
                 if scene is None:
@@ -131,7 +121,7 @@ def ComplementarityPlant_(T):
                     "geometry_pose",
                     lambda: AbstractValue.Make(FramePoseVector_[T]()),
                     self._CalcGeometryPose,
-                    prerequisites_of_calc={self.discrete_state_ticket(self.ports.x)},
+                    prerequisites_of_calc={self.discrete_state_ticket(self._x)},
                 )
 
         def _construct_copy(self, other, converter=None):
@@ -139,12 +129,6 @@ def ComplementarityPlant_(T):
                 self, other.stepper, other.on_unconverged, initial_state=other.initial_state,
                 converter=converter, _geometry=other._geometry,
             )  # fmt: skip
-
-        def get_actuation_input_port(self):
-            return self.actuation_port
-
-        def get_state_output_port(self):
-            return self.state_port
 
         def get_geometry_pose_output_port(self):
             if self.geometry_pose_port is None:
@@ -163,36 +147,23 @@ def ComplementarityPlant_(T):
             body lookups (its q is this plant's)."""
             return self._geometry
 
-        def SetInitialState(self, context, x0) -> None:
-            """Set x = (q, v) in ``context`` (same as ``context.SetDiscreteState(x0)``)."""
-            context.SetDiscreteState(np.asarray(x0))
-
         def _CalcGeometryPose(self, context, output):
             nq = self.stepper.sizes[0]
-            x = context.get_discrete_state(self.ports.x).value()
+            x = context.get_discrete_state(self._x).value()
             g = self._geometry_T
             g.SetPositions(self._geometry_context, x[:nq])
             output.set_value(g.get_geometry_pose_output_port().Eval(self._geometry_context))
 
-        def _stepper_for(self, smoothing_values):
-            s = self.stepper.smoothing
-            if np.array_equal(smoothing_values, s.parameter_values()):
-                return self.stepper
-            key = smoothing_values.tobytes()
-            if key not in self._variants:
-                if len(self._variants) > 64:
-                    self._variants.clear()
-                self._variants[key] = self.stepper.with_smoothing(
-                    s.with_parameters(smoothing_values)
-                )
-            return self._variants[key]
-
-        def _check_model(self, m):
-            if not np.array_equal(m, self._model_values):
-                names = self.stepper.parameter_names
+        def _stepper_for(self, smoothing_values, model_values) -> ComplementarityStepper:
+            """The step under a Context's parameter values: a changed smoothing is used, the
+            model parameters must keep the scene's values (they carry derivatives only)."""
+            built_s, built_m = self._built
+            if not np.array_equal(model_values, built_m):
                 changed = [
                     f"{n}: {a:g} -> {b:g}"
-                    for n, a, b in zip(names, self._model_values, m, strict=True)
+                    for n, a, b in zip(
+                        self.stepper.parameter_names, built_m, model_values, strict=True
+                    )
                     if a != b
                 ]
                 raise ValueError(
@@ -200,35 +171,14 @@ def ComplementarityPlant_(T):
                     "only; their values must stay those of the scene the plant was built from "
                     f"(changed: {', '.join(changed)}). Build the scene with the new values."
                 )
-
-        def _Update(self, context, x, u, s, m):
-            nu = self.stepper.sizes[2]
-            if not any(autodiff.is_autodiff(a) for a in (x, u, s, m)):
-                self._check_model(np.asarray(m, float))
-                stepper = self._stepper_for(np.asarray(s, float))
-                u = np.asarray(u, float) if nu else np.zeros(0)
-                r = stepper.step(np.asarray(x)[None], u[None], jacobians=False)
-                return r.x_next[0], r.impulse[0], r.mu[0], np.all(r.converged)
-            (xv, uv, sv, mv), (gx, gu, gs, gm) = autodiff.split([x, u, s, m])
-            self._check_model(mv)
-            stepper = self._stepper_for(sv)
-            model, smooth = bool(np.any(gm)), bool(np.any(gs))
-            r = stepper.step(
-                xv[None], uv[None], jacobians=True, parameters=model, smoothing_parameters=smooth
-            ).first()
-            J = autodiff.guarded_jacobians(
-                r.converged, self.on_unconverged, r.dx_dx, r.dx_du, r.dimpulse_dx, r.dimpulse_du,
-                *((r.dx_dtheta, r.dimpulse_dtheta) if model or smooth else ()),
-            )  # fmt: skip
-            dx = J[0] @ gx + J[1] @ gu
-            dimpulse = J[2] @ gx + J[3] @ gu
-            if model or smooth:
-                gtheta = np.concatenate([g for g, on in ((gm, model), (gs, smooth)) if on])
-                dx, dimpulse = dx + J[4] @ gtheta, dimpulse + J[5] @ gtheta
-            x_next = autodiff.join(r.x_next, dx)
-            impulse = autodiff.join(r.impulse, dimpulse)
-            mu = autodiff.join(r.mu, np.zeros((r.mu.shape[0], gx.shape[1])))
-            return x_next, impulse, mu, np.all(r.converged)
+            if np.array_equal(smoothing_values, built_s):
+                return self.stepper
+            return self._variant(
+                smoothing_values.tobytes(),
+                lambda: self.stepper.with_smoothing(
+                    self.stepper.smoothing.with_parameters(smoothing_values)
+                ),
+            )
 
     return Impl
 

@@ -13,11 +13,10 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs.contact.lcs import LCS, GradientMode, check_gradient_mode
+from drake_abs.contact.lcs import LCS, GradientMode, LcsStepper, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.unconverged import UnconvergedPolicy, check_unconverged_policy
-from drake_abs.systems import autodiff
-from drake_abs.systems.plant_ports import PlantPorts
+from drake_abs.systems.plant_base import ComplementarityPlantBase
 
 
 def _check_arguments(lcs, smoothing) -> None:
@@ -38,7 +37,7 @@ def _check_arguments(lcs, smoothing) -> None:
 
 @TemplateSystem.define("LcsPlant_", T_list=[float, AutoDiffXd])
 def LcsPlant_(T):
-    class Impl(LeafSystem_[T]):
+    class Impl(ComplementarityPlantBase, LeafSystem_[T]):
         """A linear complementarity system stepped every ``lcs.time_step`` seconds.
 
         .. pydrake_system::
@@ -94,19 +93,12 @@ def LcsPlant_(T):
             self.time_step = lcs.time_step
             self.smoothing = Exact() if smoothing is None else smoothing
             self.gradient = gradient
-            self._variants = {}  # (kind, parameter bytes) -> LCS or policy, for changed values
+            self._base = LcsStepper(lcs, self.smoothing, gradient)
             nx, nu, nc = lcs.dims
-            self.ports = PlantPorts(
-                self, T, nx, nu, nc, np.zeros(nx), self.smoothing.parameter_values(),
-                lcs.parameter_values(), lcs.time_step, self._Update,
+            self._declare_plant(
+                T, nx, nu, nc, np.zeros(nx), self.smoothing.parameter_values(),
+                lcs.parameter_values(), lcs.time_step,
             )  # fmt: skip
-            self.actuation_port = self.ports.actuation_port
-            self.state_port = self.ports.state_port
-            self.impulse_port = self.ports.impulse_port
-            self.mu_port = self.ports.mu_port
-            self.converged_port = self.ports.converged_port
-            self.smoothing_parameter_index = self.ports.smoothing
-            self.model_parameter_index = self.ports.model
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(
@@ -114,56 +106,19 @@ def LcsPlant_(T):
                 converter=converter,
             )  # fmt: skip
 
-        def get_actuation_input_port(self):
-            return self.actuation_port
-
-        def get_state_output_port(self):
-            return self.state_port
-
-        def SetInitialState(self, context, x0) -> None:
-            """Set x in this system's ``context`` (same as ``context.SetDiscreteState(x0)``)."""
-            context.SetDiscreteState(np.asarray(x0))
-
-        def _variant(self, kind, base, values):
-            built = base.parameter_values()
-            if np.array_equal(values, built):
-                return base
-            key = (kind, values.tobytes())
-            if key not in self._variants:
-                if len(self._variants) > 64:
-                    self._variants.clear()
-                self._variants[key] = base.with_parameters(values)
-            return self._variants[key]
-
-        def _Update(self, context, x, u, s, m):
-            if not any(autodiff.is_autodiff(a) for a in (x, u, s, m)):
-                lcs = self._variant("model", self.lcs, np.asarray(m, float))
-                smoothing = self._variant("smoothing", self.smoothing, np.asarray(s, float))
-                r = lcs.step(x, u, smoothing, gradient=self.gradient, jacobians=False)
-                return r.x_next, r.impulse, r.mu, np.all(r.converged)
-            (xv, uv, sv, mv), (gx, gu, gs, gm) = autodiff.split([x, u, s, m])
-            lcs = self._variant("model", self.lcs, mv)
-            smoothing = self._variant("smoothing", self.smoothing, sv)
-            model = bool(np.any(gm))
-            smooth = bool(np.any(gs))
-            r = lcs.step(
-                xv, uv, smoothing, gradient=self.gradient, jacobians=True, parameters=model,
-                smoothing_parameters=smooth,
-            )  # fmt: skip
-            gtheta = np.concatenate([g for g, on in ((gm, model), (gs, smooth)) if on] or [gs[:0]])
-            J = autodiff.guarded_jacobians(
-                r.converged, self.on_unconverged,
-                r.dx_dx, r.dx_du, r.dimpulse_dx, r.dimpulse_du, r.dmu_dx, r.dmu_du,
-                *((r.dx_dtheta, r.dimpulse_dtheta, r.dmu_dtheta) if model or smooth else ()),
-            )  # fmt: skip
-            k = gx.shape[1]
-            extra = [np.zeros((J[0].shape[0], k)), np.zeros((J[2].shape[0], k)), 0.0]
-            if model or smooth:
-                extra = [J[6] @ gtheta, J[7] @ gtheta, J[8] @ gtheta]
-            x_next = autodiff.join(r.x_next, J[0] @ gx + J[1] @ gu + extra[0])
-            impulse = autodiff.join(r.impulse, J[2] @ gx + J[3] @ gu + extra[1])
-            mu = autodiff.join(r.mu, J[4] @ gx + J[5] @ gu + extra[2])
-            return x_next, impulse, mu, np.all(r.converged)
+        def _stepper_for(self, smoothing_values, model_values) -> LcsStepper:
+            """The step under a Context's parameter values (the built ones: no new LCS)."""
+            built_s, built_m = self._built
+            if np.array_equal(smoothing_values, built_s) and np.array_equal(model_values, built_m):
+                return self._base
+            return self._variant(
+                (smoothing_values.tobytes(), model_values.tobytes()),
+                lambda: LcsStepper(
+                    self.lcs.with_parameters(model_values),
+                    self.smoothing.with_parameters(smoothing_values),
+                    self.gradient,
+                ),
+            )
 
     return Impl
 

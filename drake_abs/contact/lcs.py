@@ -295,8 +295,8 @@ class LCS:
                     dz.append(q_shift)
                     dmu_F = np.zeros((Bn, nc, size))
                     if dmu_dz is not None:  # mu may read F's diagonal (GaussianMatched)
-                        diag = smoothing.dmu_dF_diagonal(z, self.F)
-                        dmu_F[:, np.arange(nc), np.arange(nc) * (nc + 1)] = diag
+                        diagonal = smoothing.dmu_dF_diagonal(z, self.F)  # (B, d, d)
+                        dmu_F[:, :, np.arange(nc) * (nc + 1)] = diagonal
                     dmu.append(dmu_F)
                 else:
                     dz_m = dz_m if dz_m is not None else np.zeros((Bn, nc, size))

@@ -112,10 +112,39 @@ class SmoothingPolicy(ABC):
         return np.zeros(z.shape + (len(self.parameter_names),))
 
     def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        """Derivative of each contact's mu with respect to its own diagonal entry F_ii at fixed
-        z, (B, d); zero for policies that do not read F (only
-        :class:`~drake_abs.contact.smoothing.GaussianMatched` does)."""
-        return np.zeros(z.shape)
+        """Derivative of mu with respect to the diagonal of F at fixed z, (B, d, d): entry
+        ``[b, i, j]`` is ``d mu_i / d F_jj``. Zero for policies that do not read F (of this
+        module's, only :class:`~drake_abs.contact.smoothing.GaussianMatched` does)."""
+        return np.zeros(z.shape + z.shape[-1:])
+
+
+class WrappedPolicy(SmoothingPolicy):
+    """A policy built on another one, held in the dataclass field named ``inner_field``:
+    whether it is constant or exact, and its numeric parameters, are the inner policy's."""
+
+    inner_field = "policy"
+
+    @property
+    def inner(self) -> SmoothingPolicy:
+        return getattr(self, self.inner_field)
+
+    @property
+    def is_constant(self) -> bool:
+        return self.inner.is_constant
+
+    @property
+    def is_exact(self) -> bool:
+        return self.inner.is_exact
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return self.inner.parameter_names
+
+    def parameter_values(self) -> np.ndarray:
+        return self.inner.parameter_values()
+
+    def with_parameters(self, values) -> SmoothingPolicy:
+        return replace(self, **{self.inner_field: self.inner.with_parameters(values)})
 
 
 @dataclass(frozen=True)
@@ -323,11 +352,15 @@ class GaussianMatched(SmoothingPolicy):
         return np.where(((kappa > 0) & (slack > 0))[..., None], d, 0.0)
 
     def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
+        # each contact's mu reads its own F_ii only
         Fd, t, kappa, slack = self._parts(z, F)
         pdf = _INV_SQRT_2PI * np.exp(-0.5 * t * t)
         neg_part = self.sigma * pdf - z * ndtr(-t)
         d = -neg_part / Fd**2 * slack + kappa * (self.c1 * z + self.c2)
-        return np.where((kappa > 0) & (slack > 0), d, 0.0)
+        out = np.zeros(z.shape + z.shape[-1:])
+        idx = np.arange(z.shape[-1])
+        out[..., idx, idx] = np.where((kappa > 0) & (slack > 0), d, 0.0)
+        return out
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         Fd, t, kappa, slack = self._parts(z, F)
@@ -341,7 +374,7 @@ class GaussianMatched(SmoothingPolicy):
 
 
 @dataclass(frozen=True)
-class TimeStepScaled(SmoothingPolicy):
+class TimeStepScaled(WrappedPolicy):
     """``policy`` stated at a reference time step, run at another: mu (and dmu_dz) are the inner
     policy's times ``scale = h / h_ref``.
 
@@ -384,30 +417,14 @@ class TimeStepScaled(SmoothingPolicy):
             return policy
         return cls(policy, h / h_ref)
 
-    @property
-    def is_constant(self) -> bool:
-        return self.policy.is_constant
-
-    @property
-    def is_exact(self) -> bool:
-        return self.policy.is_exact
-
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return self.scale * self.policy.mu(z, F)
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return self.scale * self.policy.dmu_dz(z, F)
 
-    @property
-    def parameter_names(self) -> tuple[str, ...]:
-        """The inner policy's (as stated at the reference step; the scale is not one)."""
-        return self.policy.parameter_names
-
-    def parameter_values(self) -> np.ndarray:
-        return self.policy.parameter_values()
-
-    def with_parameters(self, values) -> SmoothingPolicy:
-        return replace(self, policy=self.policy.with_parameters(values))
+    # the numeric parameters are the inner policy's, as stated at the reference step (the
+    # scale is not one)
 
     def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         return self.scale * self.policy.dmu_dparameters(z, F)

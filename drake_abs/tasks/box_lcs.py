@@ -29,7 +29,7 @@ smoother**) is given to the normal row, mu / h to the friction and cone rows
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,7 +41,7 @@ from drake_abs.contact.contact_lcp import (
     expand_mu,
 )
 from drake_abs.contact.lcs import LCS, GradientMode, LcsStepper
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.smoothing import Exact, SmoothingPolicy, WrappedPolicy
 
 #: Tangent directions of the planar cone, in (x, z) velocity coordinates: +x, -x (the order of
 #: ``systems.multibody_quantities.tangent_directions`` for the normal +z and k = 2).
@@ -50,68 +50,46 @@ _NORMAL = np.array([[0.0, 1.0]])
 
 
 @dataclass(frozen=True)
-class PerContactSmoothing(SmoothingPolicy):
+class PerContactSmoothing(WrappedPolicy):
     """A smoothing policy applied to a frictional LCP's rows the way ``contact_step`` does.
 
     ``contact`` sees the normal rows (z (B, nc), F_nn) and gives one mu per contact (larger is
     smoother); friction and cone rows of that contact get mu / h. In the ``total`` gradient mode
-    mu is differentiated through the normal rows' z only.
+    mu is differentiated through the normal rows' z only. Its numeric parameters are
+    ``contact``'s.
     """
 
     contact: SmoothingPolicy
     cone: FrictionCone
     time_step: float
 
-    @property
-    def is_constant(self) -> bool:
-        return self.contact.is_constant
+    inner_field = "contact"
 
-    @property
-    def is_exact(self) -> bool:
-        return self.contact.is_exact
+    def _rows(self, z, F, contact_level, square: bool = False) -> np.ndarray:
+        """A contact-level quantity ``contact_level(z_n, F_nn)`` (B, nc, ...) on the rows
+        (B, d, ...); with ``square`` its trailing contact axis padded to the d rows (a derivative
+        with respect to the rows' z or F diagonal, zero for friction and cone rows)."""
+        nc = self.cone.sizes()[0]
+        Z = np.atleast_2d(z)
+        value = contact_level(Z[:, :nc], F[..., :nc, :nc])
+        rows = expand_mu(np.atleast_2d(value), self.cone, self.time_step)
+        if square:
+            out = np.zeros(Z.shape + Z.shape[-1:])
+            out[:, :, :nc] = rows
+            rows = out
+        return rows.reshape(z.shape + rows.shape[2:])
 
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        nc = self.cone.sizes()[0]
-        mu_n = self.contact.mu(z[..., :nc], F[..., :nc, :nc])
-        return expand_mu(np.atleast_2d(mu_n), self.cone, self.time_step).reshape(z.shape)
+        return self._rows(z, F, self.contact.mu)
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        nc = self.cone.sizes()[0]
-        Z = np.atleast_2d(z)
-        dmu_n = self.contact.dmu_dz(Z[:, :nc], F[..., :nc, :nc])
-        out = np.zeros(Z.shape + Z.shape[-1:])
-        out[:, :, :nc] = expand_mu(dmu_n, self.cone, self.time_step)
-        return out.reshape(z.shape + z.shape[-1:])
-
-    @property
-    def parameter_names(self) -> tuple[str, ...]:
-        """The contact policy's."""
-        return self.contact.parameter_names
-
-    def parameter_values(self) -> np.ndarray:
-        return self.contact.parameter_values()
-
-    def with_parameters(self, values) -> SmoothingPolicy:
-        return replace(self, contact=self.contact.with_parameters(values))
+        return self._rows(z, F, self.contact.dmu_dz, square=True)
 
     def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        nc = self.cone.sizes()[0]
-        Z = np.atleast_2d(z)
-        d = self.contact.dmu_dparameters(Z[:, :nc], F[..., :nc, :nc])
-        return expand_mu(d, self.cone, self.time_step).reshape(z.shape + d.shape[-1:])
+        return self._rows(z, F, self.contact.dmu_dparameters)
 
     def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        nc = self.cone.sizes()[0]
-        Z = np.atleast_2d(z)
-        out = np.zeros(Z.shape)
-        out[:, :nc] = self.contact.dmu_dF_diagonal(Z[:, :nc], F[..., :nc, :nc])
-        if Z.shape[1] > nc and np.any(out[:, :nc]):
-            # the friction rows' mu follows the normal row's F_ii, which (B, d) cannot say
-            raise NotImplementedError(
-                "the derivative of a per-contact mu that reads F (GaussianMatched) with "
-                "respect to F, on an LCS with friction rows"
-            )
-        return out.reshape(z.shape)
+        return self._rows(z, F, self.contact.dmu_dF_diagonal, square=True)
 
 
 @dataclass(frozen=True)
