@@ -74,22 +74,6 @@ def progress(iterable: Iterable | None = None, *, total: int | None = None, desc
     )
 
 
-def smoothing_label(policy) -> str:
-    """A readable name of a smoothing policy for plot legends: ``"exact"``, ``"barrier
-    smoothing, mu = 1e-3"``, ``"adaptive (ABS), contact-aware"`` ..."""
-    from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched
-
-    if isinstance(policy, Exact):
-        return "exact"
-    if isinstance(policy, Fixed):
-        return f"barrier smoothing, mu = {policy.value:g}"
-    if isinstance(policy, ContactAware):
-        return f"adaptive (ABS), contact-aware, mu_max = {policy.mu_max:g}"
-    if isinstance(policy, GaussianMatched):
-        return f"adaptive (ABS), Gaussian-matched, sigma = {policy.sigma:g} m"
-    return type(policy).__name__
-
-
 def readable(name: str) -> str:
     """A readable legend entry for the case names the experiments use as keys (``"BS mu=1e-2"``,
     ``"ABS contact-aware (total)"``, ``"bs_mu=0.001"``, ``"gamma=0.5"``...)."""

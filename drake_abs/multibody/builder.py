@@ -99,6 +99,12 @@ def model_file_url(file: str) -> str | None:
 
 
 def package_folders() -> dict[str, Path]:
+    """A copy of :func:`_package_folders` (listed once per process)."""
+    return dict(_package_folders())
+
+
+@functools.cache
+def _package_folders() -> dict[str, Path]:
     """The packages a scene's ``package://<package>/<path>`` may name, name -> folder:
     ``drake_abs`` (this package's folder: ``models/``, ``scenes/``); when installed,
     ``example-robot-data`` (its share folder: ``robots/<robot>_description/...``) and each of its
