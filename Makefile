@@ -40,6 +40,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_policy_gradient.py --json results/bench_policy_gradient.json
 	$(PY) benchmarks/bench_variance.py
 	$(PY) benchmarks/bench_mpc.py
+	$(PY) benchmarks/bench_drake_systems.py
 
 # Regenerate constraints.txt: upgrade to the newest versions pyproject.toml's ranges allow, run
 # the whole suite, and record the versions only if it passes.
