@@ -221,3 +221,28 @@ def test_one_call_scene_plant_with_geometry_for_meshcat_and_queries():
     ad_context = ad.CreateDefaultContext()
     ad.get_input_port(0).FixValue(ad_context, np.zeros(plant.actuation_port.size()))
     Simulator_[AutoDiffXd](ad, ad_context).AdvanceTo(0.05)
+
+
+def test_hostile_context_values_are_refused_by_name():
+    """A NaN or out-of-range parameter in the Context, a NaN state, or a wrong stepper is an
+    error that names what is wrong, never a silent step."""
+    lcs = point_mass_lcs(2, time_step=H)
+    plant = LcsPlant(lcs, ContactAware(1e-2, 0.05))
+    x0 = np.array([0.0, 0.3, 1.0, 0.0])
+    s0, m0 = ContactAware(1e-2, 0.05).parameter_values(), lcs.parameter_values()
+    with pytest.raises(ValueError, match=r"ContactAware.length"):
+        _simulate(plant, x0, 0.05, smoothing=s0 * np.array([1.0, -1.0, 1.0]))
+    with pytest.raises(ValueError, match=r"ContactAware.mu_max"):
+        _simulate(plant, x0, 0.05, smoothing=np.array([np.nan, 0.05, 0.0]))
+    bad = m0.copy()
+    bad[0] = np.nan
+    with pytest.raises(ValueError, match=r"LCS.A"):
+        _simulate(plant, x0, 0.05, model=bad)
+    with pytest.raises(ValueError, match=r"\bx\b"):
+        _simulate(plant, np.array([0.0, np.nan, 1.0, 0.0]), 0.05)
+    with pytest.raises(ValueError, match=r"stepper must be a ComplementarityStepper"):
+        ComplementarityPlant(lcs)
+    with pytest.raises(ValueError, match=r"builder must be a DiagramBuilder"):
+        AddComplementarityPlantSceneGraph(object(), "box_push")
+    with pytest.raises(ValueError, match=r"initial_state must be 6 finite numbers"):
+        ComplementarityPlant(build_scene_model("box_push").stepper(), initial_state=np.zeros(3))
