@@ -252,7 +252,7 @@ class SceneModel:
                 ``"anitescu"``).
             solver_options: passed to the interior-point solver.
         """
-        return ComplementarityStepper(
+        stepper = ComplementarityStepper(
             self.contact_model,
             self.scene.smoothing_policy() if smoothing is None else smoothing,
             gradient,
@@ -260,6 +260,8 @@ class SceneModel:
             self.scene.friction_model if friction is None else friction,
             **solver_options,
         )
+        stepper.scene = self.scene
+        return stepper
 
 
 def _parse(parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where: str):
@@ -383,6 +385,23 @@ def _check_armature(model: PinocchioContactModel, plant: MultibodyPlant) -> None
             f"{reflected.tolist()} that the pinocchio dynamics do not include (they have "
             f"{armature.tolist()}); use dynamics: drake"
         )
+
+
+#: Scene models rebuilt in this process from pickled steppers, by scene (as YAML text): a
+#: worker that receives several objectives of one scene parses its model files once.
+_REBUILT: dict[str, SceneModel] = {}
+
+
+def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
+    """A pickled :class:`ComplementarityStepper` rebuilt from its scene and settings (smoothing,
+    gradient, activation_distance, friction, joint_limits, damping, solver options)."""
+    key = scene.to_yaml()
+    model = _REBUILT.get(key)
+    if model is None:
+        model = _REBUILT.setdefault(key, build_scene_model(scene))
+    stepper = ComplementarityStepper(model.contact_model, **settings)
+    stepper.scene = model.scene
+    return stepper
 
 
 def make_stepper(scene: Scene | str | Path, **overrides) -> ComplementarityStepper:

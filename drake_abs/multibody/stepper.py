@@ -91,6 +91,29 @@ class ComplementarityStepper:
         self._clips = bool(np.isfinite(self.effort).any())  # per-step work only where needed
         self._damps = bool(self.damping.any())
         self._damping = self.damping if self._damps else None  # passed to the provider
+        self._flags = {"joint_limits": bool(joint_limits), "damping": bool(damping)}
+        #: The scene this stepper was built from (set by :meth:`SceneModel.stepper`), which
+        #: makes it picklable: it is sent as the scene description and its settings, and
+        #: rebuilt where it is unpickled (a Ray worker: :mod:`drake_abs.parallel`).
+        self.scene = None
+
+    def __reduce__(self):
+        """Pickled as its scene and settings (see :attr:`scene`); a stepper built from a contact
+        model directly has no description to send."""
+        if self.scene is None:
+            raise TypeError(
+                "this ComplementarityStepper was built from a contact model, not from a scene, "
+                "so it cannot be pickled (e.g. sent to Ray workers): build it with "
+                "make_stepper(scene, ...) or SceneModel.stepper(...)"
+            )
+        from drake_abs.multibody.builder import rebuild_stepper
+
+        settings = dict(
+            smoothing=self.smoothing, gradient=self.gradient,
+            activation_distance=self.activation_distance, friction=self.friction,
+            **self._flags, **self.solver_options,
+        )  # fmt: skip
+        return rebuild_stepper, (self.scene, settings)
 
     @property
     def sizes(self) -> tuple[int, int, int, int]:

@@ -15,6 +15,11 @@
 Every estimator takes a :class:`PolicyObjective`, theta and a numpy Generator (all randomness
 comes from it: the same seed gives the same numbers) and returns a :class:`GradientEstimate`.
 
+Where the rollouts run: each estimator states its rollouts as jobs
+(:class:`~drake_abs.policy.rollouts.RolloutJob`) with noise from a seed tree, and a ``runner``
+runs them: this process by default, or Ray actors (:class:`drake_abs.parallel.RayRunner`). The
+estimate is the same, to rounding, whatever runs the jobs and however they are split.
+
 Every rollout runs in the one closed-loop engine (:func:`drake_abs.engine.rollout`).
 Unconverged solver steps: the objective's ``on_unconverged`` policy (default ``"drop"``) decides;
 under ``"drop"`` every average runs over the rollouts whose steps all converged, and the estimate
@@ -36,6 +41,15 @@ from drake_abs.contact.unconverged import (
 from drake_abs.engine import Policy, Reward, Stepper, Trajectory, rollout
 from drake_abs.engine.closed_loop import STEPPER_FORM
 from drake_abs.engine.protocols import check_protocol
+from drake_abs.policy.rollouts import (
+    RolloutJob,
+    RolloutStats,
+    Runner,
+    default_runner,
+    noise_key,
+    reraise_warnings,
+    rollout_noise,
+)
 
 
 @dataclass(frozen=True)
@@ -66,13 +80,29 @@ class PolicyObjective:
         check_protocol(self.stepper, Stepper, "stepper", STEPPER_FORM)
         check_protocol(self.policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
         check_protocol(self.reward, Reward, "reward", "stage, terminal")
+        x0 = np.asarray(self.x0, dtype=float)
+        if x0.shape != (self.policy.nx,):
+            raise ValueError(
+                f"x0 must have shape (nx,) = ({self.policy.nx},), the policy's state size; got "
+                f"{x0.shape}"
+            )
+        for size in ("nx", "nu"):
+            mine, theirs = getattr(self.policy, size), getattr(self.reward, size, None)
+            if theirs is not None and theirs != mine:
+                raise ValueError(
+                    f"reward and policy disagree on {size}: the reward's is {theirs}, the "
+                    f"policy's {mine}"
+                )
         if int(self.horizon) < 1:
             raise ValueError(f"horizon must be >= 1; got {self.horizon!r}")
         if not (np.isfinite(self.sigma) and self.sigma >= 0):
             raise ValueError(f"sigma must be >= 0; got {self.sigma!r}")
 
     def noise(self, rng: np.random.Generator, M: int) -> np.ndarray:
-        return rng.standard_normal((M, int(self.horizon), self.policy.nu))
+        """(M, H, nu) standard-normal exploration noise: rollouts 0..M-1 of a fresh stream of
+        the seed tree (:func:`~drake_abs.policy.rollouts.rollout_noise`), the noise an estimator
+        given the same ``rng`` uses."""
+        return rollout_noise(noise_key(rng), 0, int(M), int(self.horizon), self.policy.nu)
 
     def rollout(self, theta, noise: np.ndarray, gradient: bool = True) -> Trajectory:
         return rollout(
@@ -95,12 +125,12 @@ class GradientEstimate:
     dropped: int = 0
 
 
-def _summary(grad, returns, rollouts: list[Trajectory]) -> GradientEstimate:
-    steps = sum(r.converged.size for r in rollouts)
-    bad = sum(int((~r.converged).sum()) for r in rollouts)
-    n = sum(r.converged.shape[0] for r in rollouts)
-    dropped = sum(r.dropped for r in rollouts)
-    return GradientEstimate(np.asarray(grad), float(np.mean(returns)), n, steps, bad, dropped)
+def _summary(grad, returns, stats: list[RolloutStats]) -> GradientEstimate:
+    return GradientEstimate(
+        np.asarray(grad), float(np.mean(returns)), sum(s.rollouts for s in stats),
+        sum(s.steps for s in stats), sum(int(s.unconverged.sum()) for s in stats),
+        sum(s.dropped for s in stats),
+    )  # fmt: skip
 
 
 def _require(count: int, needed: int, what: str) -> None:
@@ -110,21 +140,37 @@ def _require(count: int, needed: int, what: str) -> None:
         )
 
 
-def first_order(obj: PolicyObjective, theta, rng: np.random.Generator, M: int) -> GradientEstimate:
+def _run(obj: PolicyObjective, runner: Runner | None, jobs: list[RolloutJob], *, gradient: bool,
+         score: bool = False) -> list[RolloutStats]:  # fmt: skip
+    """The jobs' per-rollout results from ``runner`` (default: :func:`default_runner`)."""
+    runner = default_runner() if runner is None else runner
+    if not isinstance(runner, Runner):
+        raise ValueError(
+            f"runner must have run(objective, jobs, *, gradient, score) (a LocalRunner or a "
+            f"drake_abs.parallel.RayRunner); got {type(runner).__name__}"
+        )
+    stats = runner.run(obj, jobs, gradient=gradient, score=score)
+    if len(stats) != len(jobs) or any(
+        s.rollouts != j.size for s, j in zip(stats, jobs, strict=True)
+    ):
+        raise RuntimeError(f"{runner!r} returned results that do not match the jobs it was given")
+    reraise_warnings(stats)
+    return stats
+
+
+def first_order(
+    obj: PolicyObjective, theta, rng: np.random.Generator, M: int, *, runner: Runner | None = None
+) -> GradientEstimate:
     """FOPG (eq. 4.1) from M rollouts (the mean over the rollouts used)."""
-    r = obj.rollout(theta, obj.noise(rng, M))
-    _require(int(r.used.sum()), 1, "first_order")
-    return _summary(r.grad[r.used].mean(axis=0), r.returns[r.used], [r])
+    (s,) = _run(obj, runner, [RolloutJob(theta, noise_key(rng), 0, _count(M, "M"))], gradient=True)
+    _require(int(s.used.sum()), 1, "first_order")
+    return _summary(s.grad[s.used].mean(axis=0), s.returns[s.used], [s])
 
 
-def _score(obj: PolicyObjective, theta, r: Trajectory, noise: np.ndarray) -> np.ndarray:
-    """sum_t grad_theta log pi(u_t | x_t) per rollout (M, P): (xi_t / sigma) dpi/dtheta."""
-    if obj.sigma <= 0:
-        raise ValueError("the likelihood-ratio estimator needs exploration noise: sigma > 0")
-    score = np.zeros((noise.shape[0], np.size(theta)))
-    for t in range(noise.shape[1]):
-        score += obj.policy.vjp(theta, r.x[:, t], noise[:, t] / obj.sigma)[1]
-    return score
+def _count(value, name: str, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{name} must be a whole number >= {minimum}; got {value!r}")
+    return int(value)
 
 
 def _loo_baseline(R: np.ndarray) -> np.ndarray:
@@ -132,53 +178,56 @@ def _loo_baseline(R: np.ndarray) -> np.ndarray:
     return (R.sum() - R) / (M - 1) if M > 1 else np.zeros(M)
 
 
-def zeroth_order(obj: PolicyObjective, theta, rng: np.random.Generator, M: int) -> GradientEstimate:
+def zeroth_order(
+    obj: PolicyObjective, theta, rng: np.random.Generator, M: int, *, runner: Runner | None = None
+) -> GradientEstimate:
     """ZOPG: likelihood ratio with a leave-one-out baseline, from M rollouts (M >= 2)."""
     if M < 2:
         raise ValueError(f"M must be >= 2 for the leave-one-out baseline; got {M}")
-    noise = obj.noise(rng, M)
-    r = obj.rollout(theta, noise, gradient=False)
-    _require(int(r.used.sum()), 2, "zeroth_order")
-    score = _score(obj, theta, r, noise)[r.used]
-    R = r.returns[r.used]
+    if obj.sigma <= 0:
+        raise ValueError("the likelihood-ratio estimator needs exploration noise: sigma > 0")
+    job = RolloutJob(theta, noise_key(rng), 0, _count(M, "M", 2))
+    (s,) = _run(obj, runner, [job], gradient=False, score=True)
+    _require(int(s.used.sum()), 2, "zeroth_order")
+    R = s.returns[s.used]
     adv = R - _loo_baseline(R)
-    return _summary((adv[:, None] * score).mean(axis=0), R, [r])
+    return _summary((adv[:, None] * s.score[s.used]).mean(axis=0), R, [s])
 
 
 def alpha_order(
-    obj: PolicyObjective, theta, rng: np.random.Generator, M: int, alpha: float
-) -> GradientEstimate:
+    obj: PolicyObjective, theta, rng: np.random.Generator, M: int, alpha: float, *,
+    runner: Runner | None = None,
+) -> GradientEstimate:  # fmt: skip
     """``alpha g_FO + (1 - alpha) g_ZO`` from the same M rollouts (alpha in [0, 1])."""
     if not 0.0 <= alpha <= 1.0:
         raise ValueError(f"alpha must be in [0, 1]; got {alpha!r}")
-    noise = obj.noise(rng, M)
-    r = obj.rollout(theta, noise)
-    _require(int(r.used.sum()), 2, "alpha_order")
-    score = _score(obj, theta, r, noise)[r.used]
-    R = r.returns[r.used]
-    g_zo = ((R - _loo_baseline(R))[:, None] * score).mean(axis=0)
-    return _summary(alpha * r.grad[r.used].mean(axis=0) + (1 - alpha) * g_zo, R, [r])
+    if obj.sigma <= 0:
+        raise ValueError("the likelihood-ratio estimator needs exploration noise: sigma > 0")
+    job = RolloutJob(theta, noise_key(rng), 0, _count(M, "M"))
+    (s,) = _run(obj, runner, [job], gradient=True, score=True)
+    _require(int(s.used.sum()), 2, "alpha_order")
+    R = s.returns[s.used]
+    g_zo = ((R - _loo_baseline(R))[:, None] * s.score[s.used]).mean(axis=0)
+    return _summary(alpha * s.grad[s.used].mean(axis=0) + (1 - alpha) * g_zo, R, [s])
 
 
 def randomized_smoothing(
-    obj: PolicyObjective, theta, rng: np.random.Generator, N: int, std: float
-) -> GradientEstimate:
+    obj: PolicyObjective, theta, rng: np.random.Generator, N: int, std: float, *,
+    runner: Runner | None = None,
+) -> GradientEstimate:  # fmt: skip
     """Bundled gradient: the mean first-order gradient at N parameters theta + w_i,
-    ``w_i ~ N(0, std^2 I)``, one rollout each (its own action noise)."""
+    ``w_i ~ N(0, std^2 I)``, one rollout each (rollout i of one noise stream)."""
     if not (np.isfinite(std) and std > 0):
         raise ValueError(f"std must be a finite number > 0; got {std!r}")
     theta = np.asarray(theta, float)
-    w = std * rng.standard_normal((N, theta.size))
-    noise = obj.noise(rng, N)
-    grads, returns, rolls = [], [], []
-    for i in range(N):  # one parameter per rollout: N batched rollouts of one
-        r = obj.rollout(theta + w[i], noise[i : i + 1])
-        rolls.append(r)
-        if r.used[0]:
-            grads.append(r.grad[0])
-            returns.append(r.returns[0])
-    _require(len(grads), 1, "randomized_smoothing")
-    return _summary(np.mean(grads, axis=0), np.array(returns), rolls)
+    w = std * rng.standard_normal((_count(N, "N"), theta.size))
+    key = noise_key(rng)
+    jobs = [RolloutJob(theta + w[i], key, i, i + 1) for i in range(N)]
+    stats = _run(obj, runner, jobs, gradient=True)
+    used = [s for s in stats if s.used[0]]
+    _require(len(used), 1, "randomized_smoothing")
+    grads = np.array([s.grad[0] for s in used])
+    return _summary(grads.mean(axis=0), np.array([s.returns[0] for s in used]), stats)
 
 
 def ars(
@@ -189,29 +238,35 @@ def ars(
     step: float,
     top: int | None = None,
     M: int = 1,
+    *,
+    runner: Runner | None = None,
 ) -> GradientEstimate:
     """ARS V1-t (Mania et al. 2018): ``(1 / (b sigma_R)) sum_top (J(theta + s d) -
     J(theta - s d)) d`` over b = ``top`` of ``directions`` Gaussian directions d, with s =
     ``step``; each J from M rollouts with common noise for the + and - evaluation. Returned as
     an ascent direction in the units ARS steps with (not divided by s)."""
     theta = np.asarray(theta, float)
+    directions = _count(directions, "directions")
     top = directions if top is None else int(top)
     if not 1 <= top <= directions:
         raise ValueError(f"top must be in [1, directions = {directions}]; got {top}")
     d = rng.standard_normal((directions, theta.size))
-    plus, minus, rolls = np.empty(directions), np.empty(directions), []
-    valid = np.ones(directions, dtype=bool)  # both sides free of unconverged rollouts
-    for i in range(directions):
-        noise = obj.noise(rng, M)
-        rp = obj.rollout(theta + step * d[i], noise, gradient=False)
-        rm = obj.rollout(theta - step * d[i], noise, gradient=False)
-        plus[i], minus[i] = rp.returns.mean(), rm.returns.mean()
-        valid[i] = rp.used.all() and rm.used.all()
-        rolls += [rp, rm]
+    keys = [noise_key(rng) for _ in range(directions)]  # common noise for + and -
+    jobs = [
+        RolloutJob(theta + sign * step * d[i], keys[i], 0, _count(M, "M"))
+        for i in range(directions)
+        for sign in (1.0, -1.0)
+    ]
+    stats = _run(obj, runner, jobs, gradient=False)
+    plus = np.array([s.returns.mean() for s in stats[0::2]])
+    minus = np.array([s.returns.mean() for s in stats[1::2]])
+    valid = np.array(
+        [p.used.all() and m.used.all() for p, m in zip(stats[0::2], stats[1::2], strict=True)]
+    )
     _require(int(valid.sum()), top, "ars (directions)")
     plus, minus, d = plus[valid], minus[valid], d[valid]
     best = np.argsort(-np.maximum(plus, minus))[:top]
     used = np.concatenate([plus[best], minus[best]])
     scale = used.std() if used.std() > 0 else 1.0
     grad = ((plus[best] - minus[best])[:, None] * d[best]).sum(axis=0) / (top * scale)
-    return _summary(grad, np.concatenate([plus, minus]), rolls)
+    return _summary(grad, np.concatenate([plus, minus]), stats)

@@ -95,7 +95,9 @@ def test_reference_is_unbiased_and_consistent_on_the_smooth_problem():
 def test_bias_near_contact_is_resolved_for_large_mu_and_much_smaller_for_exact_fopg():
     """BS with mu = 0.1 near contact is clearly biased. Hard-contact FOPG is unbiased in
     expectation (the step is Lipschitz) but heavy tailed, so at this sample size its measured
-    distance need not be below the noise floor; it must be far below the BS bias though."""
+    distance need not be below the noise floor; it must be far below the BS bias though. With
+    8 batches of 16 one seed in six drew a tail sample that put the exact distance at 0.17; with
+    16 batches of 32 it stays at or below 0.043 for seeds 0-5 (BS: 0.43)."""
     theta, H = spring_theta(), 100
     ref = reference_gradient(
         hopping_ball(Exact(), horizon=H), theta, samples=512, batches=8, seed=0
@@ -103,8 +105,8 @@ def test_bias_near_contact_is_resolved_for_large_mu_and_much_smaller_for_exact_f
     out = {}
     for name, smoothing in {"exact": Exact(), "bs": Fixed(1e-1)}.items():
         obj = hopping_ball(smoothing, horizon=H)
-        est = measure_variance(lambda th, rng, o=obj: first_order(o, th, rng, 16), theta,
-                               batches=8, seed=4)  # fmt: skip
+        est = measure_variance(lambda th, rng, o=obj: first_order(o, th, rng, 32), theta,
+                               batches=16, seed=4)  # fmt: skip
         out[name] = measure_bias(est, ref)
     assert out["exact"].distance < out["bs"].distance / 3
     assert out["bs"].resolved and out["bs"].bias > 10 * out["bs"].noise

@@ -323,3 +323,7 @@ def test_the_objective_checks_its_policy_and_reward_protocols():
         PolicyObjective(stepper, object(), reward, x0, horizon)
     with pytest.raises(TypeError, match="reward must be a Reward"):
         PolicyObjective(stepper, LinearPolicy(NX, NU), object(), x0, horizon)
+    with pytest.raises(ValueError, match=r"x0 must have shape \(nx,\) = \(4,\)"):
+        PolicyObjective(stepper, LinearPolicy(NX, NU), reward, np.zeros(5), horizon)
+    with pytest.raises(ValueError, match="reward and policy disagree on nx"):
+        PolicyObjective(stepper, LinearPolicy(5, NU), reward, np.zeros(5), horizon)
