@@ -11,7 +11,7 @@ CONSTRAINTS := constraints.txt
 $(STAMP): pyproject.toml $(CONSTRAINTS)
 	@test -x $(PY) || "$$(tools/find_python312.sh)" -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip -c $(CONSTRAINTS)
-	$(PY) -m pip install --quiet -e '.[dev]' -c $(CONSTRAINTS)
+	$(PY) -m pip install --quiet -e '.[dev,ray]' -c $(CONSTRAINTS)
 	$(VENV)/bin/drake-abs precompile
 	@touch $(STAMP)
 
@@ -41,13 +41,14 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_variance.py
 	$(PY) benchmarks/bench_mpc.py
 	$(PY) benchmarks/bench_drake_systems.py
+	$(PY) benchmarks/bench_ray.py --json results/bench_ray.json
 
 # Regenerate constraints.txt: upgrade to the newest versions pyproject.toml's ranges allow, run
 # the whole suite, and record the versions only if it passes.
 lock:
 	@test -x $(PY) || "$$(tools/find_python312.sh)" -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet --upgrade --upgrade-strategy eager -e '.[dev]'
+	$(PY) -m pip install --quiet --upgrade --upgrade-strategy eager -e '.[dev,ray]'
 	$(VENV)/bin/drake-abs precompile
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/ruff check .
