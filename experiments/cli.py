@@ -1,8 +1,11 @@
 """The drake-abs command line.
 
 drake-abs demo [--out DIR] [--duration S] [--no-meshcat]
-drake-abs experiment NAME [--out DIR] [--test-size] [--no-progress]
+drake-abs experiment NAME [--out DIR] [--test-size] [--no-progress] [--ray] [--address ADDR]
+                     [--workers N]
 drake-abs experiment --list
+drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
+                [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
 drake-abs record SCENE [--steps N] [--out FILE]
 drake-abs list
 drake-abs precompile
@@ -173,14 +176,81 @@ def _run_demo(out: Path, *, duration: float | None, meshcat: bool) -> int:
     return 0
 
 
-def _run_standard(name: str, out: Path | None, *, test_size: bool) -> int:
+def _run_standard(name: str, out: Path | None, *, test_size: bool, ray: bool = False,
+                  address: str | None = None, workers: int | None = None) -> int:  # fmt: skip
+    """Run one experiment; with ``ray`` its estimators' rollouts go to a
+    :class:`~drake_abs.parallel.RayRunner` (the same numbers, see drake_abs.parallel)."""
     from drake_abs.experiments._common import default_out
 
     module = importlib.import_module(f"drake_abs.experiments.{STANDARD_EXPERIMENTS[name]}")
     config = module.Config.test_size() if test_size else module.Config()
     folder = default_out(name) if out is None else out.expanduser().resolve()
-    _print_report(module.report(module.run(config, folder)), folder)
+    if not ray:
+        summary = module.run(config, folder)
+    else:
+        from drake_abs.parallel import RayRunner, connect, shutdown
+        from drake_abs.policy.rollouts import use_runner
+
+        connect(address, num_cpus=workers)
+        try:
+            with RayRunner() as runner, use_runner(runner):
+                summary = module.run(config, folder)
+                print(f"rollouts ran on {runner.workers} Ray worker(s) in {runner.tasks_sent} "
+                      "tasks")  # fmt: skip
+        finally:
+            shutdown()
+    _print_report(module.report(summary), folder)
     return 0
+
+
+def _run_sweep(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """The sweep subcommand: build the grid (argument errors exit 2), run it, print the report;
+    1 if a point failed (everything is written first)."""
+    from drake_abs.experiments.sweep import ExperimentPoint, GridError, build_grid, report
+    from drake_abs.parallel.sweep import run_sweep
+
+    if args.address is not None and args.workers is not None:
+        sub.error("argument --workers: sets the CPUs of a local Ray cluster; a cluster joined "
+                  "with --address has its own")  # fmt: skip
+    try:
+        points = build_grid(args.name, seeds=args.seeds, settings=args.settings,
+                            test_size=args.test_size)  # fmt: skip
+    except GridError as err:
+        sub.error(f"argument {err.argument}: {err}")
+    out = Path(args.out or f"results/sweep-{args.name}").expanduser().resolve()
+    on_ray = args.ray or args.address is not None or args.workers is not None
+    try:
+        result = run_sweep(
+            ExperimentPoint(args.name, args.test_size), points, out,
+            backend="ray" if on_ray else "local", address=args.address, num_cpus=args.workers,
+            resume=not args.fresh, progress=not args.no_progress, metric=args.metric,
+        )  # fmt: skip
+    except ImportError as err:  # Ray asked for but not installed
+        sub.error(f"argument --ray: {err}")
+    print(report(result))
+    print(f"results written to {out}")
+    if result.metric_error:
+        sub.error(f"argument --metric: {result.metric_error} (everything else is written; run "
+                  "again with another --metric: finished points are not recomputed)")  # fmt: skip
+    if result.failures:
+        print(f"{len(result.failures)} of {len(result.points)} points failed; each traceback is "
+              "in its point.json", file=sys.stderr)  # fmt: skip
+        return 1
+    return 0
+
+
+def seed_number(text: str) -> int:
+    """An argparse type: a seed, a whole number >= 0."""
+    try:
+        value = int(text, 10)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0 such as 0, got {text!r}")
+    return value
+
+
+seed_number.__name__ = "seed"
 
 
 def _record(scene, steps: int, out: str | None) -> int:
@@ -203,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="drake-abs",
         description="Adaptive barrier smoothing on Drake: the demo, the papers' experiments, "
-        "scene recordings.",
+        "sweeps of them over seeds and settings (here or on Ray), scene recordings.",
         epilog="Names are shown with dashes; the same names with underscores are accepted too. "
         "'drake-abs list' shows every experiment and scene.",
     )
@@ -251,6 +321,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     exp.add_argument("--test-size", action="store_true", help="the reduced size CI runs")
     exp.add_argument("--no-progress", action="store_true", help="no progress bars")
+    exp.add_argument(
+        "--ray", action="store_true",
+        help="run the estimators' rollouts on Ray actors (a local cluster on 127.0.0.1)",
+    )  # fmt: skip
+    exp.add_argument(
+        "--address", default=None, metavar="ADDR",
+        help="join this Ray cluster (auto, HOST:6379 or ray://HOST:10001; implies --ray)",
+    )  # fmt: skip
+    exp.add_argument(
+        "--workers", type=positive_int("--workers", "4"), default=None, metavar="N",
+        help="CPUs of the local Ray cluster (implies --ray; default: all)",
+    )  # fmt: skip
 
     rec = sub.add_parser(
         "record",
@@ -274,7 +356,57 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument(
         "--out", default=None, metavar="FILE", help="HTML file (default: results/SCENE.html)"
     )
-    parser.subcommands = {"demo": demo, "experiment": exp, "record": rec}
+    sweep = sub.add_parser(
+        "sweep",
+        help="run an experiment over seeds and settings, here or on a Ray cluster",
+        description="Run one experiment for every combination of seeds and settings, each "
+        "point in its own folder (points/NAME under the results folder), and gather the "
+        "summaries into sweep.json, sweep.csv and sweep.png. A point already done in the "
+        "results folder is not computed again; a point that fails is reported with its "
+        "traceback and the others complete (the exit code is then 1).",
+        epilog="examples:\n"
+        "  drake-abs sweep gradient-variance --test-size --seeds 0 1 2 --set samples=8,16\n"
+        "  drake-abs sweep gradient-variance --seeds 0 1 --set 'horizons=[10,50],[100]' --ray\n"
+        "  drake-abs sweep ball-throw --set learning_rate=0.01,0.03 --address HEAD:6379\n"
+        "values are YAML: 10, 1e-4, true, [10, 50] (a list is one value of a tuple setting);\n"
+        "a setting's values are split on the commas outside brackets.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sweep.add_argument(
+        "name", type=experiment_name, choices=EXPERIMENTS, metavar="NAME",
+        help="the experiment, e.g. gradient-variance (see 'drake-abs list')",
+    )  # fmt: skip
+    sweep.add_argument(
+        "--seeds", nargs="+", type=seed_number, default=None, metavar="S",
+        help="seeds, e.g. 0 1 2 (for experiments with a seed setting; default: its own)",
+    )  # fmt: skip
+    sweep.add_argument(
+        "--set", action="append", default=[], dest="settings", metavar="KEY=V1,V2",
+        help="a setting of the experiment's Config and its values; repeat for more settings "
+        "(every combination is run)",
+    )  # fmt: skip
+    sweep.add_argument("--test-size", action="store_true", help="start from the reduced size")
+    sweep.add_argument(
+        "--out", default=None, metavar="DIR", help="results folder (default: results/sweep-NAME)"
+    )
+    sweep.add_argument(
+        "--ray", action="store_true", help="run the points as Ray tasks on a local cluster"
+    )
+    sweep.add_argument(
+        "--address", default=None, metavar="ADDR",
+        help="join this Ray cluster (auto, HOST:6379 or ray://HOST:10001; implies --ray)",
+    )  # fmt: skip
+    sweep.add_argument(
+        "--workers", type=positive_int("--workers", "4"), default=None, metavar="N",
+        help="CPUs of the local Ray cluster (implies --ray; default: all)",
+    )  # fmt: skip
+    sweep.add_argument(
+        "--metric", default=None, metavar="KEY",
+        help="the numeric column of sweep.csv to plot (default: the first that varies)",
+    )  # fmt: skip
+    sweep.add_argument("--fresh", action="store_true", help="recompute every point (no resume)")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.subcommands = {"demo": demo, "experiment": exp, "record": rec, "sweep": sweep}
 
     sub.add_parser(
         "list",
@@ -317,6 +449,9 @@ def main(argv: list[str] | None = None) -> int:
         except (ValueError, OSError) as err:  # a malformed or unreadable scene file
             sub.error(f"argument SCENE: {err}")
         return _record(scene, args.steps, args.out)
+    if args.command == "sweep":
+        _check_folder(sub, args.out)
+        return _run_sweep(sub, args)
     if args.command == "demo":
         _check_folder(sub, args.out)
         if args.duration is not None:
@@ -332,8 +467,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.name is None:
         sub.error("the following arguments are required: NAME (see 'drake-abs list')")
     _check_folder(sub, args.out)
+    if args.address is not None and args.workers is not None:
+        sub.error("argument --workers: sets the CPUs of a local Ray cluster; a cluster joined "
+                  "with --address has its own")  # fmt: skip
     out = None if args.out is None else Path(args.out)
-    return _run_standard(args.name, out, test_size=args.test_size)
+    on_ray = args.ray or args.address is not None or args.workers is not None
+    if on_ray:
+        try:
+            from drake_abs.parallel.cluster import require_ray
+
+            require_ray()
+        except ImportError as err:
+            sub.error(f"argument --ray: {err}")
+    return _run_standard(args.name, out, test_size=args.test_size, ray=on_ray,
+                         address=args.address, workers=args.workers)  # fmt: skip
 
 
 if __name__ == "__main__":

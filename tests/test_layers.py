@@ -28,6 +28,11 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         set(),
     ),
     "drake_abs/mpc": ("drake_abs.mpc", {"drake_abs.contact", "drake_abs.engine"}, {"osqp"}),
+    "drake_abs/parallel": (
+        "drake_abs.parallel",
+        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine", "drake_abs.policy"},
+        {"tqdm", "matplotlib", "ray"},  # progress bars, the sweep's plot, the cluster
+    ),
     "drake_abs/multibody": (
         "drake_abs.multibody",
         {"drake_abs.lcp", "drake_abs.contact"},
@@ -63,7 +68,9 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
 }
 # Every layer may use these.
 COMMON = {"numpy", "scipy", "numba", "drake_abs._validation", "__future__"}
-THIRD_PARTY_GUARDED = {"pydrake", "pinocchio", "osqp", "meshcat", "matplotlib", "tqdm", "yaml"}
+THIRD_PARTY_GUARDED = {
+    "pydrake", "pinocchio", "osqp", "meshcat", "matplotlib", "tqdm", "yaml", "ray",
+}  # fmt: skip
 STDLIB = set(sys.stdlib_module_names)
 
 

@@ -10,5 +10,6 @@ single-process run returns for the same seed: the noise of rollout m comes from 
 
 from drake_abs.parallel.cluster import connect, shutdown
 from drake_abs.parallel.runner import RayRunner
+from drake_abs.parallel.sweep import SweepResult, run_sweep
 
-__all__ = ["RayRunner", "connect", "shutdown"]
+__all__ = ["RayRunner", "SweepResult", "connect", "run_sweep", "shutdown"]

@@ -117,7 +117,9 @@ def test_experiment_names_in_either_spelling(spelling, monkeypatch, tmp_path):
     calls = []
     monkeypatch.setattr(cli, "_run_standard", lambda name, out, **k: calls.append((name, k)) or 0)
     assert main(["experiment", spelling, "--test-size", "--out", str(tmp_path)]) == 0
-    assert calls == [("gradient-variance", {"test_size": True})]
+    assert calls == [
+        ("gradient-variance", {"test_size": True, "ray": False, "address": None, "workers": None})
+    ]
 
 
 @pytest.mark.parametrize("spelling", ["box_push", "box-push", "solo12-drop", "gym_half-cheetah"])

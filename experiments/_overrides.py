@@ -1,0 +1,160 @@
+"""Overriding fields of an experiment's ``Config`` (a frozen dataclass) by name, with each value
+checked against the field's type and converted where that loses nothing.
+
+The type of a field is its annotation when that is ``int``, ``float``, ``bool``, ``str``, a
+tuple of these (``tuple[int, ...]`` or a fixed ``tuple[float, float]``) or one of these or None;
+otherwise the type of its default value. Conversions: an int to a float field; a whole float
+(``10.0``) or a numeric text to an int field; a numeric text (``"1e-4"``, which YAML reads as
+text) to a float field; a list to a tuple field (items converted the same way) and a single item
+to a one-item tuple. Booleans are only ``true``/``false``: never a number, never a number's
+field. Anything else is a ValueError that names the field and the type it expects.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from collections.abc import Mapping
+from numbers import Integral, Real
+from typing import Any
+
+_SCALARS = (bool, int, float, str)
+
+
+def field_names(cls: type) -> list[str]:
+    """The fields of a Config dataclass, in declaration order."""
+    return [f.name for f in dataclasses.fields(cls)]
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    try:
+        return typing.get_type_hints(cls)
+    except Exception:  # an annotation that cannot be resolved: fall back to the defaults
+        return {}
+
+
+def expected_type(cls: type, name: str, default: Any) -> Any:
+    """The type a field's value must have: a scalar type, ``("tuple", item_type | None)``
+    (any length), ``("fixed", (types...))``, ``("optional", inner)`` or None (anything; a
+    field whose default is None and whose annotation says nothing usable)."""
+    hint = _hints(cls).get(name)
+    spec = _from_hint(hint) if hint is not None else None
+    if spec is not None:
+        return spec
+    if isinstance(default, _SCALARS):
+        return type(default)
+    if isinstance(default, tuple):
+        kinds = {type(v) for v in default}
+        return ("tuple", kinds.pop() if len(kinds) == 1 and kinds <= set(_SCALARS) else None)
+    return None if default is None else type(default)
+
+
+def _from_hint(hint: Any) -> Any:
+    if hint in _SCALARS:
+        return hint
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis and args[0] in _SCALARS:
+            return ("tuple", args[0])
+        if args and Ellipsis not in args and all(a in _SCALARS for a in args):
+            return ("fixed", tuple(args))
+        return ("tuple", None)
+    if origin in (typing.Union, types.UnionType) and type(None) in args:
+        rest = [a for a in args if a is not type(None)]
+        inner = _from_hint(rest[0]) if len(rest) == 1 else None
+        return ("optional", inner)
+    return None
+
+
+def _describe(spec: Any) -> str:
+    if isinstance(spec, type):
+        return {bool: "true or false", int: "a whole number", float: "a number",
+                str: "text"}.get(spec, spec.__name__)  # fmt: skip
+    kind, inner = spec
+    if kind == "tuple":
+        return "a list such as [1, 2]" + (f" of {_describe(inner)}s" if inner else "")
+    if kind == "fixed":
+        return f"a list of {len(inner)} items ({', '.join(_describe(t) for t in inner)})"
+    return f"{_describe(inner) if inner else 'a value'} or null"
+
+
+def coerce(name: str, value: Any, spec: Any) -> Any:
+    """``value`` converted to ``spec`` (:func:`expected_type`), or a ValueError naming ``name``."""
+    bad = ValueError(f"{name}: expected {_describe(spec) if spec else 'a value'}, got {value!r}")
+    if spec is None:
+        return value
+    if spec is bool:
+        if isinstance(value, bool):
+            return value
+        raise bad
+    if isinstance(value, bool) and spec in (int, float, str):
+        raise bad
+    if spec is int:
+        if isinstance(value, Integral):
+            return int(value)
+        if isinstance(value, Real) and float(value).is_integer():
+            return int(value)
+        if isinstance(value, str):
+            try:
+                return int(value.strip(), 10)
+            except ValueError:
+                raise bad from None
+        raise bad
+    if spec is float:
+        if isinstance(value, Real):
+            return float(value)
+        if isinstance(value, str):
+            try:
+                return float(value)
+            except ValueError:
+                raise bad from None
+        raise bad
+    if spec is str:
+        if isinstance(value, str):
+            return value
+        raise bad
+    if isinstance(spec, type):  # a default of another type (e.g. a dataclass): as it is
+        if isinstance(value, spec):
+            return value
+        raise bad
+    kind, inner = spec
+    if kind == "optional":
+        return None if value is None else coerce(name, value, inner)
+    items = list(value) if isinstance(value, list | tuple) else [value]
+    if kind == "fixed":
+        if len(items) != len(inner):
+            raise bad
+        return tuple(
+            coerce(f"{name}[{i}]", v, t) for i, (v, t) in enumerate(zip(items, inner, strict=True))
+        )
+    return tuple(coerce(f"{name}[{i}]", v, inner) for i, v in enumerate(items))
+
+
+def check_field(cls: type, name: str) -> None:
+    """A ValueError listing the fields unless ``name`` is one of ``cls``'s."""
+    names = field_names(cls)
+    if name not in names:
+        raise ValueError(f"unknown setting {name!r}; the settings are: {', '.join(names)}")
+
+
+def field_spec(config: Any, name: str) -> Any:
+    """The :func:`expected_type` of field ``name`` of ``config``'s class (from the annotation,
+    else from the field's default, else from ``config``'s value); ValueError for an unknown
+    field."""
+    cls = type(config)
+    check_field(cls, name)
+    f = next(f for f in dataclasses.fields(cls) if f.name == name)
+    default = f.default if f.default is not dataclasses.MISSING else getattr(config, name)
+    return expected_type(cls, name, default)
+
+
+def coerce_field(config: Any, name: str, value: Any) -> Any:
+    """``value`` checked and converted for field ``name`` of ``config`` (:func:`field_spec`)."""
+    return coerce(name, value, field_spec(config, name))
+
+
+def apply_overrides(config: Any, values: Mapping[str, Any]) -> Any:
+    """``dataclasses.replace(config, **values)`` with every value checked and converted."""
+    changes = {name: coerce_field(config, name, v) for name, v in values.items()}
+    return dataclasses.replace(config, **changes)
