@@ -9,9 +9,9 @@ Localhost only, locally: Ray picks the node's IP address for its servers (GCS, r
 agents) and on Linux binds them to the machine's external address or to all interfaces. For a
 local cluster we set ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0`` before Ray starts: Ray then takes
 the loopback address as the node's address (what it does on a laptop), and every server it starts
-binds to 127.0.0.1 (checked by ``tests/parallel/test_cluster.py`` with ``ss``). The variable is
-set for this process and inherited by the processes Ray starts; it is not set when joining a
-cluster, whose nodes must reach each other.
+binds to 127.0.0.1 (checked by ``tests/parallel/test_ray_runner.py``). The variable is set for
+this process and inherited by the processes Ray starts; it is not set when joining a cluster at
+another machine's address, whose nodes must reach each other.
 """
 
 from __future__ import annotations
@@ -60,13 +60,14 @@ def connect(
     if address is not None and num_cpus is not None:
         raise ValueError("num_cpus is for a local cluster; a joined cluster's nodes declare theirs")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # no report leaves this machine
-    if address is None:
+    if address is None or _loopback(address):
         os.environ[LOCAL_ONLY_VARIABLE] = "0"
     ray = require_ray()
     if ray.is_initialized():
         return ray.cluster_resources()
-    if address is None:
+    if address is None or _loopback(address):
         _local_only_in_this_process()
+    if address is None:
         ray.init(
             num_cpus=None if num_cpus is None else int(num_cpus),
             include_dashboard=False,
@@ -76,8 +77,34 @@ def connect(
             logging_level="WARNING",
         )
     else:
-        ray.init(address=address.strip(), log_to_driver=not quiet, logging_level="WARNING")
+        try:
+            ray.init(address=address.strip(), log_to_driver=not quiet, logging_level="WARNING")
+        except (ConnectionError, RuntimeError) as err:
+            raise ConnectionError(
+                f"could not join the Ray cluster at {address!r}: {_first_line(err)}. Check that "
+                "'ray start --head' runs there and that this machine reaches it; a cluster with "
+                "token authentication (Ray's default for clusters started on one machine) needs "
+                "RAY_AUTH_MODE=token and its token (RAY_AUTH_TOKEN, from 'ray get-auth-token' on "
+                "the head) in this process's environment"
+            ) from err
     return ray.cluster_resources()
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip()
+    causes = [text.splitlines()[0] if text else type(err).__name__]
+    cause = err.__cause__
+    while cause is not None:  # Ray wraps the reason (e.g. an authentication error)
+        causes.append(str(cause).strip().splitlines()[-1] if str(cause).strip() else "")
+        cause = cause.__cause__
+    return "; ".join(c for c in causes if c)[:400]
+
+
+def _loopback(address: str) -> bool:
+    """Whether a cluster address names this machine's loopback interface (a cluster started
+    here with ``ray start --head``): this process then takes 127.0.0.1 as its node address too."""
+    host = address.strip().removeprefix("ray://").rsplit(":", 1)[0].strip("[]")
+    return host in ("localhost", "::1") or host.startswith("127.")
 
 
 def _local_only_in_this_process() -> None:
