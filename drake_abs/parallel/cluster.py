@@ -69,6 +69,7 @@ def connect(
         _local_only_in_this_process()
     if address is None:
         ray.init(
+            address="local",  # always a new cluster (never one a stale session file names)
             num_cpus=None if num_cpus is None else int(num_cpus),
             include_dashboard=False,
             dashboard_host="127.0.0.1",
