@@ -55,7 +55,7 @@ def head():
             assert proc.poll() is None, "ray start --head exited"
             assert time.monotonic() < deadline, "the head did not listen within 120 s"
             time.sleep(0.5)
-    yield f"127.0.0.1:{port}"
+    yield f"127.0.0.1:{port}", proc.pid
     proc.send_signal(signal.SIGTERM)  # ray start --block stops the processes it started
     try:
         proc.wait(timeout=60)
@@ -94,11 +94,34 @@ def _same_numbers(a: dict, b: dict) -> None:
     assert not differ, differ[:5]
 
 
+def test_the_heads_listeners_are_on_the_loopback_interface(head):
+    import ipaddress
+
+    import psutil
+
+    session = os.getsid(head[1])
+    pids = {p.pid for p in psutil.process_iter() if _sid(p.pid) == session}
+    listening = [c for c in psutil.net_connections(kind="inet")
+                 if c.status == psutil.CONN_LISTEN and c.pid in pids]  # fmt: skip
+    assert listening, "no listener found (the check would pass vacuously)"
+    for c in listening:
+        address = ipaddress.ip_address(c.laddr.ip)
+        address = getattr(address, "ipv4_mapped", None) or address
+        assert address.is_loopback, (c.pid, c.laddr)
+
+
+def _sid(pid: int) -> int | None:
+    try:
+        return os.getsid(pid)
+    except OSError:
+        return None
+
+
 def test_the_same_command_line_joins_a_cluster_with_address(head, tmp_path):
     common = ["experiment", "gradient-variance", "--test-size"]
     local = _run([*common, "--out", str(tmp_path / "local")])
     assert local.returncode == 0, local.stderr[-2000:]
-    joined = _run([*common, "--address", head, "--out", str(tmp_path / "joined")],
+    joined = _run([*common, "--address", head[0], "--out", str(tmp_path / "joined")],
                   RAY_AUTH_MODE="token")  # fmt: skip
     assert joined.returncode == 0, joined.stderr[-2000:]
     assert "Ray worker(s)" in joined.stdout
@@ -113,7 +136,7 @@ def test_a_sweep_joins_a_cluster_with_address(head, tmp_path):
             "--set", "horizons=[10]"]  # fmt: skip
     local = _run([*grid, "--out", str(tmp_path / "local")])
     assert local.returncode == 0, local.stderr[-2000:]
-    joined = _run([*grid, "--address", head, "--out", str(tmp_path / "joined")],
+    joined = _run([*grid, "--address", head[0], "--out", str(tmp_path / "joined")],
                   RAY_AUTH_MODE="token")  # fmt: skip
     assert joined.returncode == 0, joined.stderr[-2000:]
     a = json.loads((tmp_path / "local" / "sweep.json").read_text())
@@ -125,7 +148,7 @@ def test_a_sweep_joins_a_cluster_with_address(head, tmp_path):
 
 
 def test_joining_without_the_cluster_token_says_what_to_set(head):
-    no_token = _run(["experiment", "gradient-variance", "--test-size", "--address", head],
+    no_token = _run(["experiment", "gradient-variance", "--test-size", "--address", head[0]],
                     RAY_AUTH_MODE="disabled")  # fmt: skip
     assert no_token.returncode != 0
     assert "could not join the Ray cluster" in no_token.stderr
