@@ -1,15 +1,17 @@
 """The drake-abs command line.
 
-drake-abs demo [--out DIR] [--duration S] [--no-meshcat]
-drake-abs experiment NAME [--out DIR] [--test-size] [--no-progress] [--ray] [--address ADDR]
-                     [--workers N]
-drake-abs experiment --list
-drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
-                [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
-drake-abs record SCENE [--steps N] [--out FILE]
-drake-abs list
-drake-abs precompile
-drake-abs --version
+Usage::
+
+    drake-abs demo [--out DIR] [--duration S] [--no-meshcat]
+    drake-abs experiment NAME [--out DIR] [--test-size] [--no-progress] [--ray] [--address ADDR]
+                         [--workers N]
+    drake-abs experiment --list
+    drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
+                    [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
+    drake-abs record SCENE [--steps N] [--out FILE]
+    drake-abs list
+    drake-abs precompile
+    drake-abs --version
 
 Names are shown with dashes (gradient-variance, box-push); underscores are accepted too.
 """

@@ -92,7 +92,8 @@ class ComplementarityStepper:
         self._damps = bool(self.damping.any())
         self._damping = self.damping if self._damps else None  # passed to the provider
         self._flags = {"joint_limits": bool(joint_limits), "damping": bool(damping)}
-        #: The scene this stepper was built from (set by :meth:`SceneModel.stepper`), which
+        #: The scene this stepper was built from (set by
+        #: :meth:`drake_abs.multibody.builder.SceneModel.stepper`), which
         #: makes it picklable: it is sent as the scene description and its settings, and
         #: rebuilt where it is unpickled (a Ray worker: :mod:`drake_abs.parallel`).
         self.scene = None

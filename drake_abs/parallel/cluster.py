@@ -19,7 +19,8 @@ from __future__ import annotations
 import os
 from typing import Any
 
-#: Ray's own switch: with "0" the node's address is the loopback address (see the module doc).
+#: The environment variable (Ray's own) that, set to "0", makes the node's address the
+#: loopback address (see the module doc).
 LOCAL_ONLY_VARIABLE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
 
 

@@ -203,7 +203,7 @@ def default_runner() -> Runner:
 
 class use_runner:  # noqa: N801 - used as a context manager, like a function
     """Make ``runner`` the estimators' default within a ``with`` block (or, called without
-    ``with``, until :meth:`close`), e.g. to send an experiment's rollouts to Ray without
+    ``with``, until its ``close()``), e.g. to send an experiment's rollouts to Ray without
     changing its code."""
 
     def __init__(self, runner: Runner):
