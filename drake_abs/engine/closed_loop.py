@@ -19,6 +19,14 @@ MPC, keeps the products of its forward solves instead).
 
 Unconverged steps: ``on_unconverged`` (:mod:`drake_abs.contact.unconverged`; default ``"drop"``:
 a rollout with an unconverged step is marked unused, and its return and gradients are NaN).
+
+Rewards of transitions and episodes that end: a
+:class:`~drake_abs.engine.protocols.TransitionReward` is evaluated on (x_t, u_t, x_{t+1}), its
+``dr/dx_{t+1}`` entering the reverse pass at t + 1. With ``terminated``, an episode ends with the
+step that reached a terminal state: that step's reward counts, the later ones and the terminal
+reward do not, and the ended rollout stays at its last state (it is still stepped, as part of the
+batch, but its steps count for nothing: not in the return, not in ``converged``, not in the
+gradient). ``Trajectory.alive`` says which steps counted.
 """
 
 from __future__ import annotations
@@ -39,7 +47,9 @@ from drake_abs.engine.protocols import (
     PullbackPolicy,
     Reward,
     Stepper,
+    TransitionReward,
     check_protocol,
+    check_reward,
 )
 
 STEPPER_FORM = "step(x, u, *, jacobians, parameters) -> Step, parameter_names"
@@ -57,6 +67,10 @@ class Trajectory:
             whose every step converged under ``"drop"``.
         returns: (M,) sum of stage rewards plus the terminal reward (None without a reward;
             NaN for a dropped rollout).
+        alive: (M, H) whether step t's reward counts: all True unless the reward has
+            ``terminated`` (a :class:`~drake_abs.engine.protocols.TransitionReward`), then False
+            after the step that ended the episode. ``alive.sum(axis=1)`` are the episodes'
+            environment steps.
         grad: (M, P) dJ_m/dtheta of the policy parameters (None unless gradients were asked
             for with a policy and a reward; NaN for a dropped rollout).
         grad_x0: (M, nx) dJ_m/dx_0 (as ``grad``).
@@ -79,6 +93,7 @@ class Trajectory:
     model_parameter_names: tuple[str, ...] = ()
     dxH_dx0: np.ndarray | None = None
     dxH_du: np.ndarray | None = None
+    alive: np.ndarray | None = None
 
     @property
     def dropped(self) -> int:
@@ -100,9 +115,10 @@ class _Tape:
     dx_dtheta: np.ndarray | None
     theta_names: tuple[str, ...]
     stage_returns: np.ndarray | None  # (M,) sum of the stage rewards
-    stage_x: np.ndarray | None  # (M, H, nx) dr/dx_t
+    stage_x: np.ndarray | None  # (M, H + 1, nx) dr/dx_t (row H: from the last transition)
     stage_u: np.ndarray | None  # (M, H, nu) dr/du_t
     vjps: list | None
+    alive: np.ndarray  # (M, H + 1): the rewards of step t (t = H: the terminal one) count
 
 
 def rollout_memory_bytes(M: int, H: int, nx: int, nu: int, n_model_params: int = 0) -> int:
@@ -146,21 +162,25 @@ def rollout(
     if policy is not None:
         check_protocol(policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
     if reward is not None:
-        check_protocol(reward, Reward, "reward", "stage, terminal")
+        check_reward(reward)
     if gradient and reward is None:
         raise ValueError("gradient=True needs a reward (the objective to differentiate)")
     if parameters and not gradient:
         raise ValueError("parameters=True needs gradient=True")
     tape = _forward(stepper, policy, theta, x0, noise, reward, sigma, gradient, parameters,
                     on_unconverged)  # fmt: skip
-    used = apply_unconverged_policy(tape.converged, on_unconverged)
+    # a step after the episode ended does not count, converged or not
+    used = apply_unconverged_policy(tape.converged | ~tape.alive[:, :-1], on_unconverged)
     common = dict(
         x=tape.x, u=tape.u, impulse=tape.impulse, mu=tape.mu, converged=tape.converged,
-        used=used, model_parameter_names=tape.theta_names,
+        used=used, model_parameter_names=tape.theta_names, alive=tape.alive[:, :-1],
     )  # fmt: skip
     if reward is None:
         return Trajectory(**common)
+    end = tape.alive[:, -1]
     r_T, dr_T = reward.terminal(tape.x[:, -1])
+    r_T = np.where(end, r_T, 0.0)
+    dr_T = np.where(end[:, None], dr_T, 0.0) + tape.stage_x[:, -1] if gradient else None
     returns = tape.stage_returns + r_T
     _check_finite(returns[used], "return")
     returns[~used] = np.nan  # a dropped rollout's states are not the model's either
@@ -168,7 +188,7 @@ def rollout(
         return Trajectory(returns=returns, **common)
     adj = reverse_pass(
         tape.dx_dx, tape.dx_du, dr_T[:, None, :],
-        stage_x=tape.stage_x[:, :, None, :], stage_u=tape.stage_u[:, :, None, :],
+        stage_x=tape.stage_x[:, :-1, None, :], stage_u=tape.stage_u[:, :, None, :],
         policy_vjps=tape.vjps, n_policy_params=np.size(theta) if policy is not None else 0,
         dx_dtheta=tape.dx_dtheta,
     )  # fmt: skip
@@ -222,7 +242,7 @@ def open_loop(
         du[~used] = np.nan
     return Trajectory(
         x=tape.x, u=tape.u, impulse=tape.impulse, mu=tape.mu, converged=tape.converged,
-        used=used, dxH_dx0=dx0, dxH_du=du,
+        used=used, dxH_dx0=dx0, dxH_du=du, alive=tape.alive[:, :-1],
     )  # fmt: skip
 
 
@@ -259,8 +279,11 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
     Fu = np.empty((M, H, nx, nu)) if jacobians else None
     Fth = np.empty((M, H, nx, len(names))) if parameters else None
     returns = np.zeros(M) if reward is not None else None
-    rx = np.empty((M, H, nx)) if (reward is not None and jacobians) else None
-    ru = np.empty((M, H, nu)) if rx is not None else None
+    rx = np.zeros((M, H + 1, nx)) if (reward is not None and jacobians) else None
+    ru = np.zeros((M, H, nu)) if rx is not None else None
+    of_transition = reward is not None and isinstance(reward, TransitionReward)
+    ends = of_transition and hasattr(reward, "terminated")
+    alive = np.ones((M, H + 1), dtype=bool)
     pullback = jacobians and isinstance(policy, PullbackPolicy)
     vjps = [] if (jacobians and policy is not None) else None
     for t in range(H):
@@ -276,7 +299,7 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
             if vjps is not None:
                 vjps.append(_recomputed_vjp(policy, theta, x))
         us[:, t] = u
-        if reward is not None:
+        if reward is not None and not of_transition:
             r, dr_dx, dr_du = reward.stage(x, u)
             returns += r  # in time order, one step at a time
             if rx is not None:
@@ -291,9 +314,27 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
             Fx[:, t], Fu[:, t] = step.dx_dx, step.dx_du
         if parameters:
             Fth[:, t] = step.dx_dtheta
+        if of_transition:
+            now = alive[:, t]
+            r, dr_dx, dr_du, dr_dxn = reward.transition(x, u, xs[:, t + 1])
+            returns += np.where(now, r, 0.0)  # a step after the end counts nothing
+            if rx is not None:
+                rx[:, t] += np.where(now[:, None], dr_dx, 0.0)
+                ru[:, t] = np.where(now[:, None], dr_du, 0.0)
+                rx[:, t + 1] += np.where(now[:, None], dr_dxn, 0.0)
+            alive[:, t + 1] = now & ~np.asarray(reward.terminated(xs[:, t + 1]), bool) if ends \
+                else now  # fmt: skip
+        if ends and not alive[:, t].all():  # an ended episode stays where it ended
+            gone = ~alive[:, t]
+            xs[gone, t + 1] = xs[gone, t]
+            conv[gone, t] = True
+            if jacobians:  # and carries no derivative
+                Fx[gone, t], Fu[gone, t] = 0.0, 0.0
+            if parameters:
+                Fth[gone, t] = 0.0
     if impulse is None:  # H = 0
         impulse = mu = np.empty((M, 0, 0))
-    return _Tape(xs, us, impulse, mu, conv, Fx, Fu, Fth, names, returns, rx, ru, vjps)
+    return _Tape(xs, us, impulse, mu, conv, Fx, Fu, Fth, names, returns, rx, ru, vjps, alive)
 
 
 def _recomputed_vjp(policy: Policy, theta: np.ndarray, x: np.ndarray):

@@ -82,11 +82,45 @@ class Reward(Protocol):
 
     - ``stage(x, u)`` -> (r (M,), dr/dx (M, nx), dr/du (M, nu)), summed over t = 0 .. H-1;
     - ``terminal(x)`` -> (r_T (M,), dr_T/dx (M, nx)), added at t = H.
+
+    A reward of the transition is a :class:`TransitionReward` instead.
     """
 
     def stage(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
     def terminal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@runtime_checkable
+class TransitionReward(Protocol):
+    """A reward of each transition (x_t, u_t, x_{t+1}), as gymnasium's locomotion rewards are
+    (forward velocity from the positions before and after the step), maximised:
+
+    - ``transition(x, u, x_next)`` -> (r (M,), dr/dx (M, nx), dr/du (M, nu), dr/dx_next (M, nx)),
+      summed over t = 0 .. H-1;
+    - ``terminal(x)`` -> (r_T (M,), dr_T/dx (M, nx)), added at t = H.
+
+    Optionally ``terminated(x_next) -> (M,) bool``: an episode ends with the step that reached
+    x_next (that step's reward counts; the later steps' rewards and the terminal reward do not,
+    as in gymnasium, where ``terminated`` ends the episode). The indicator has zero derivative.
+    """
+
+    def transition(
+        self, x: np.ndarray, u: np.ndarray, x_next: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def terminal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+#: What a reward argument must be, for error messages.
+REWARD_FORM = "stage(x, u) or transition(x, u, x_next), and terminal(x)"
+
+
+def check_reward(reward, name: str = "reward") -> None:
+    """Raise ``TypeError`` naming the argument unless ``reward`` is a :class:`Reward` or a
+    :class:`TransitionReward`."""
+    if not isinstance(reward, Reward | TransitionReward):
+        raise TypeError(f"{name} must be a Reward ({REWARD_FORM}); got {type(reward).__name__}")
 
 
 def check_protocol(value, protocol: type, name: str, form: str) -> None:

@@ -40,7 +40,7 @@ from drake_abs.contact.unconverged import (
 )
 from drake_abs.engine import Policy, Reward, Stepper, Trajectory, rollout
 from drake_abs.engine.closed_loop import STEPPER_FORM
-from drake_abs.engine.protocols import check_protocol
+from drake_abs.engine.protocols import check_protocol, check_reward
 from drake_abs.policy.rollouts import (
     RolloutJob,
     RolloutStats,
@@ -79,7 +79,7 @@ class PolicyObjective:
         check_unconverged_policy(self.on_unconverged)
         check_protocol(self.stepper, Stepper, "stepper", STEPPER_FORM)
         check_protocol(self.policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
-        check_protocol(self.reward, Reward, "reward", "stage, terminal")
+        check_reward(self.reward)
         x0 = np.asarray(self.x0, dtype=float)
         if x0.shape != (self.policy.nx,):
             raise ValueError(
@@ -115,7 +115,9 @@ class PolicyObjective:
 class GradientEstimate:
     """One estimate: ``grad`` (P,) of the mean return, ``value`` (mean return of the rollouts
     it used), ``rollouts`` and ``steps`` (simulated), ``unconverged`` (steps whose solver did not
-    converge), ``dropped`` (rollouts left out for them, under ``on_unconverged="drop"``)."""
+    converge), ``dropped`` (rollouts left out for them, under ``on_unconverged="drop"``),
+    ``env_steps`` (the steps that counted: ``steps`` unless episodes ended early; the sample
+    count of a learning curve)."""
 
     grad: np.ndarray
     value: float
@@ -123,13 +125,14 @@ class GradientEstimate:
     steps: int
     unconverged: int
     dropped: int = 0
+    env_steps: int = 0
 
 
 def _summary(grad, returns, stats: list[RolloutStats]) -> GradientEstimate:
     return GradientEstimate(
         np.asarray(grad), float(np.mean(returns)), sum(s.rollouts for s in stats),
         sum(s.steps for s in stats), sum(int(s.unconverged.sum()) for s in stats),
-        sum(s.dropped for s in stats),
+        sum(s.dropped for s in stats), sum(int(s.env_steps.sum()) for s in stats),
     )  # fmt: skip
 
 

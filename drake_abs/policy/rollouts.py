@@ -102,6 +102,8 @@ class RolloutStats:
         grad: (n, P) dJ/dtheta of each rollout (when gradients were asked for; NaN if dropped).
         score: (n, P) ``sum_t (xi_t / sigma) dpi/dtheta``, the likelihood-ratio score (when
             asked for).
+        env_steps: (n,) steps that counted (H unless an episode ended: see
+            :class:`~drake_abs.engine.protocols.TransitionReward`).
         warnings: (category, message) of the warnings the rollouts raised, for a runner in
             another process to raise again where the estimate is made.
     """
@@ -112,6 +114,7 @@ class RolloutStats:
     horizon: int
     grad: np.ndarray | None = None
     score: np.ndarray | None = None
+    env_steps: np.ndarray | None = None
     warnings: tuple = field(default=(), compare=False)
 
     @property
@@ -140,7 +143,7 @@ class RolloutStats:
 
         return cls(
             cat("returns"), cat("used"), cat("unconverged"), parts[0].horizon, cat("grad"),
-            cat("score"), tuple(w for p in parts for w in p.warnings),
+            cat("score"), cat("env_steps"), tuple(w for p in parts for w in p.warnings),
         )  # fmt: skip
 
 
@@ -154,7 +157,7 @@ def rollout_stats(objective, job: RolloutJob, *, gradient: bool, score: bool) ->
     return RolloutStats(
         returns=np.asarray(traj.returns, float), used=np.asarray(traj.used, bool),
         unconverged=(~traj.converged).sum(axis=1), horizon=int(objective.horizon),
-        grad=traj.grad if gradient else None, score=sc,
+        grad=traj.grad if gradient else None, score=sc, env_steps=traj.alive.sum(axis=1),
     )  # fmt: skip
 
 
