@@ -24,7 +24,15 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
     ),
     "drake_abs/tasks": (
         "drake_abs.tasks",
-        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine", "drake_abs.policy"},
+        # multibody: tasks.locomotion builds gymnasium's scenes' steppers (imported when called,
+        # so the package itself stays Drake-free)
+        {
+            "drake_abs.lcp",
+            "drake_abs.contact",
+            "drake_abs.engine",
+            "drake_abs.policy",
+            "drake_abs.multibody",
+        },
         set(),
     ),
     "drake_abs/mpc": ("drake_abs.mpc", {"drake_abs.contact", "drake_abs.engine"}, {"osqp"}),

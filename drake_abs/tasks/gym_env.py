@@ -1,0 +1,160 @@
+"""A ``gymnasium.Env`` of any scene and task, so that any reinforcement-learning library can train
+on our plant.
+
+:class:`~drake_abs.tasks.gym_env.DrakeAbsEnv` steps the task's stepper on a batch of one and
+scores the step with the task's own reward and termination (the code the batched objective runs,
+not a copy).
+
+Spaces as gymnasium's v5 MuJoCo environments: actions ``Box(-1, 1, (nu,), float32)`` (the
+task's stepper scales them to joint torques), observations ``Box(-inf, inf, (n_obs,),
+float64)``. ``reset(seed=...)`` draws the task's reset noise from the environment's
+``np_random``; with the same seed it draws what gymnasium's own Hopper-v5 / HalfCheetah-v5 draw.
+Episodes are truncated after ``max_episode_steps`` steps (default 1000, gymnasium's), at the
+scene's time step (``dt``; see :mod:`drake_abs.tasks.locomotion` on how it differs from
+gymnasium's).
+
+:func:`register_envs` registers ``drake_abs/Hopper-v0`` and ``drake_abs/HalfCheetah-v0`` for
+``gymnasium.make``.
+
+Needs gymnasium (``pip install 'drake-abs[dev]'``); the rest of :mod:`drake_abs.tasks` does not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import gymnasium
+    from gymnasium import spaces
+except ImportError as err:  # pragma: no cover - gymnasium is in the dev extra
+    raise ImportError(
+        "drake_abs.tasks.gym_env needs gymnasium: pip install 'gymnasium>=1.0' (or the dev extra "
+        "of drake-abs)"
+    ) from err
+
+from drake_abs._validation import as_count
+from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
+
+__all__ = ["ENV_IDS", "DrakeAbsEnv", "register_envs"]
+
+#: gymnasium ids registered by :func:`register_envs` -> task name.
+ENV_IDS = {"drake_abs/Hopper-v0": "hopper", "drake_abs/HalfCheetah-v0": "half_cheetah"}
+
+
+class DrakeAbsEnv(gymnasium.Env):
+    """gymnasium's environment interface over a task: a
+    :class:`~drake_abs.tasks.locomotion.LocomotionTask` (or its name), or any object with the
+    same ``stepper`` (taking actions in [-1, 1]), ``reward`` (``transition`` or ``stage``;
+    optional ``terminated``), ``observation``, ``initial_states(rng, M)``, ``x0``, ``nu``,
+    ``n_obs``, ``dt`` and optional ``info(x, u, x_next)`` and ``reset_info(x)``.
+
+    Args:
+        task: the task, or ``"hopper"`` / ``"half_cheetah"`` (built with ``task_options``, see
+            :func:`~drake_abs.tasks.locomotion.locomotion_task`).
+        max_episode_steps: steps after which an episode is truncated (None: never; a
+            ``TimeLimit`` wrapper, as ``gymnasium.make`` adds, does it then).
+        render_mode: only None (no rendering).
+
+    ``step`` returns gymnasium's ``info`` keys (``x_position``, ``x_velocity``,
+    ``reward_forward``, ``reward_ctrl``, and for the Hopper ``reward_survive``,
+    ``z_distance_from_origin``) plus ``converged``: whether the contact solver converged (a
+    False step's state is not exact).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        task: LocomotionTask | str = "hopper",
+        *,
+        max_episode_steps: int | None = 1000,
+        render_mode: str | None = None,
+        **task_options,
+    ):
+        if isinstance(task, str):
+            task = locomotion_task(task, **task_options)
+        elif task_options:
+            raise ValueError(
+                f"task_options {sorted(task_options)} apply to a task given by name only"
+            )
+        if render_mode is not None:
+            raise ValueError(f"render_mode must be None (no rendering); got {render_mode!r}")
+        self.max_episode_steps = (
+            None if max_episode_steps is None
+            else as_count(max_episode_steps, "max_episode_steps", minimum=1)
+        )  # fmt: skip
+        self.task = task
+        self.render_mode = None
+        self.dt = float(task.dt)
+        self.metadata = {"render_modes": [], "render_fps": int(np.round(1.0 / self.dt))}
+        self.action_space = spaces.Box(-1.0, 1.0, (task.nu,), np.float32)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (task.n_obs,), np.float64)
+        self._x = np.array(task.x0, dtype=float)
+        self._steps = 0
+
+    @property
+    def state(self) -> np.ndarray:
+        """The current state x = (q, v) (nx,) (a copy)."""
+        return self._x.copy()
+
+    def set_state(self, q, v) -> None:
+        """Set the state to (q, v) (as MuJoCo environments' ``set_state(qpos, qvel)``)."""
+        x = np.concatenate([np.asarray(q, float).ravel(), np.asarray(v, float).ravel()])
+        if x.shape != self._x.shape or not np.all(np.isfinite(x)):
+            raise ValueError(
+                f"q and v must be finite with {self._x.size} entries in all; got {x.shape}"
+            )
+        self._x = x
+
+    def _obs(self) -> np.ndarray:
+        return np.asarray(self.task.observation(self._x[None])[0], dtype=np.float64)
+
+    def _info(self, name: str, *args) -> dict[str, float]:
+        make = getattr(self.task, name, None)
+        return {} if make is None else {k: float(v[0]) for k, v in make(*args).items()}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode at the task's initial state plus its reset noise (drawn from
+        ``np_random``, seeded by ``seed``). Returns (observation, info)."""
+        super().reset(seed=seed)
+        self._x = self.task.initial_states(self.np_random, 1)[0]
+        self._steps = 0
+        return self._obs(), self._info("reset_info", self._x[None])
+
+    def step(self, action):
+        """Apply ``action`` (nu,) for one time step. Returns (observation, reward, terminated,
+        truncated, info)."""
+        a = np.asarray(action, dtype=float)
+        if a.shape != (self.task.nu,):
+            raise ValueError(f"action must have shape (nu,) = ({self.task.nu},); got {a.shape}")
+        x, u = self._x[None], a[None]
+        step = self.task.stepper.step(x, u, jacobians=False)
+        x_next = np.asarray(step.x_next, dtype=float).reshape(1, -1)
+        if not np.all(np.isfinite(x_next)):
+            raise FloatingPointError(
+                f"DrakeAbsEnv.step: the next state is not finite (state {self._x}, action {a})"
+            )
+        reward = self.task.reward
+        if hasattr(reward, "transition"):
+            r = reward.transition(x, u, x_next)[0]
+        else:
+            r = reward.stage(x, u)[0]
+        terminated = bool(reward.terminated(x_next)[0]) if hasattr(reward, "terminated") else False
+        info = self._info("info", x, u, x_next)
+        info["converged"] = bool(np.asarray(step.converged).ravel()[0])
+        self._x = x_next[0]
+        self._steps += 1
+        truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
+        return self._obs(), float(r[0]), terminated, truncated, info
+
+
+def register_envs() -> None:
+    """Register :data:`ENV_IDS` with gymnasium (``gymnasium.make("drake_abs/Hopper-v0")``, a
+    ``TimeLimit`` of 1000 steps); registering again is harmless."""
+    for env_id, name in ENV_IDS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            env_id, entry_point=f"{__name__}:DrakeAbsEnv", max_episode_steps=1000,
+            kwargs={"task": name, "max_episode_steps": None},
+        )  # fmt: skip
