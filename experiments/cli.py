@@ -33,6 +33,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "box-convergence": "box_convergence",
     "mpc-quadcopter": "mpc_quadcopter",
     "gradient-variance": "gradient_variance",
+    "locomotion-variance": "locomotion_variance",
     "bias-return": "bias_return",
     "ball-throw": "ball_throw",
     "smoothing-vs-rs": "smoothing_vs_rs",
@@ -49,6 +50,8 @@ DESCRIPTIONS: dict[str, str] = {
     "box-convergence": "convergence of the frictional contact solver over a grid of box settings",
     "mpc-quadcopter": "gray-box tuning of a quadcopter MPC (Zuliani et al. 2025, Figs. 1 and 2)",
     "gradient-variance": "policy-gradient variance against horizon (Zhang et al. 2023, Fig. 3)",
+    "locomotion-variance": "FOPG variance against unroll length, gymnasium's hopper, half-cheetah "
+    "(Fig. 3)",
     "bias-return": "training with BS and ABS: return and gradient bias (Zhang et al. 2023, Fig. 5)",
     "ball-throw": "learning a throw with ZOPG, FOPG, FOPG-BS, FOPG-ABS (Zhang et al. 2023, 8.3)",
     "smoothing-vs-rs": "barrier against randomised smoothing (Zhang et al. 2023, Fig. 6)",

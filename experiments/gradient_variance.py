@@ -139,7 +139,7 @@ def fit_growth(horizons, variances) -> dict:
     }
 
 
-def _label(row: dict) -> str:
+def curve_label(row: dict) -> str:
     return row["policy"] if row["modes_coincide"] else f"{row['policy']} ({row['mode']})"
 
 
@@ -174,7 +174,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     bar.close()
     curves: dict[str, dict] = {}
     for row in rows:
-        c = curves.setdefault(_label(row), {"horizon": [], "variance": [], "variance_se": []})
+        c = curves.setdefault(curve_label(row), {"horizon": [], "variance": [], "variance_se": []})
         c["horizon"].append(row["horizon"])
         c["variance"].append(row["trace_variance"])
         c["variance_se"].append(row["trace_variance_se"])
@@ -215,10 +215,14 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
 
 
 def _mu_ordering(rows: list[dict], config: Config) -> dict:
+    return mu_ordering(rows, config.horizons)
+
+
+def mu_ordering(rows: list[dict], horizons) -> dict:
     """Per horizon: is the BS variance non-increasing in mu? Counts adjacent pairs (in mu order)
     where the larger mu has the larger variance by more than 2 standard errors."""
     out = {}
-    for H in config.horizons:
+    for H in horizons:
         series = [
             r for r in rows
             if r["horizon"] == H and r["policy"].startswith("BS mu=")
@@ -237,7 +241,7 @@ def _mu_ordering(rows: list[dict], config: Config) -> dict:
     return out
 
 
-def _style(name: str, names: list[str]) -> dict:
+def line_style(name: str, names: list[str]) -> dict:
     """Line style: black for exact, a colour ramp over the BS mus (ordered), one colour per ABS
     design, dashed for the total gradient mode."""
     import matplotlib
@@ -265,7 +269,7 @@ def _plot_variance(curves: dict, path: Path) -> Path:
         ax.errorbar(
             c["horizon"], c["variance"], yerr=c["variance_se"], marker="o", ms=3,
             label=readable(name),
-            capsize=2, **_style(name, list(curves)),
+            capsize=2, **line_style(name, list(curves)),
         )  # fmt: skip
     ax.set(
         xlabel="unroll length H (steps of 0.01 s)",
@@ -290,7 +294,7 @@ def _plot_bias(curves: dict, path: Path) -> Path:
     for name, c in curves.items():
         H = np.array(c["horizon"], float)
         b = np.array([np.nan if x is None else x for x in c["bias"]], float)
-        style = _style(name, list(curves))
+        style = line_style(name, list(curves))
         ax.plot(H, b, marker="o", ms=3, label=readable(name), **style)
         unresolved = np.isnan(b)
         ax.scatter(
