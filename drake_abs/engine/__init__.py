@@ -6,8 +6,14 @@ Drake-free; any batched stepper (an LCS, a rigid-body scene, a quadcopter) plugs
 """
 
 from drake_abs.engine.adjoint import Adjoints, reverse_pass
-from drake_abs.engine.closed_loop import Trajectory, open_loop, rollout, rollout_memory_bytes
-from drake_abs.engine.protocols import Policy, PullbackPolicy, Reward, Stepper
+from drake_abs.engine.closed_loop import (
+    Trajectory,
+    open_loop,
+    record,
+    rollout,
+    rollout_memory_bytes,
+)
+from drake_abs.engine.protocols import Policy, PullbackPolicy, Reward, Stepper, TransitionReward
 from drake_abs.engine.steppers import LinearStepper, ModelJacobians
 
 __all__ = [
@@ -19,7 +25,9 @@ __all__ = [
     "Reward",
     "Stepper",
     "Trajectory",
+    "TransitionReward",
     "open_loop",
+    "record",
     "reverse_pass",
     "rollout",
     "rollout_memory_bytes",

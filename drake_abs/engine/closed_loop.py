@@ -102,8 +102,8 @@ class Trajectory:
 
 
 @dataclass(frozen=True)
-class _Tape:
-    """What the forward pass stores for the reverse pass."""
+class Tape:
+    """What the forward pass stores for the reverse pass (see :func:`record` for the fields)."""
 
     x: np.ndarray
     u: np.ndarray
@@ -115,6 +115,7 @@ class _Tape:
     dx_dtheta: np.ndarray | None
     theta_names: tuple[str, ...]
     stage_returns: np.ndarray | None  # (M,) sum of the stage rewards
+    rewards: np.ndarray | None  # (M, H) each step's reward (0 after an episode ended)
     stage_x: np.ndarray | None  # (M, H + 1, nx) dr/dx_t (row H: from the last transition)
     stage_u: np.ndarray | None  # (M, H, nu) dr/du_t
     vjps: list | None
@@ -246,8 +247,24 @@ def open_loop(
     )  # fmt: skip
 
 
+def record(stepper: Stepper, policy: Policy, theta, x0, noise, reward, *,
+           sigma: float = 1.0) -> Tape:  # fmt: skip
+    """The forward pass of :func:`rollout` with everything it stores, for estimators that need
+    more than the totals (e.g. PIPPS: each step's reward and Jacobians). Fields: ``x`` (M, H +
+    1, nx), ``u`` (M, H, nu), ``converged`` (M, H), ``dx_dx`` (M, H, nx, nx), ``dx_du`` (M, H,
+    nx, nu), ``rewards`` (M, H) each step's reward, ``stage_x`` (M, H + 1, nx) and ``stage_u``
+    (M, H, nu) the derivatives of the step rewards with respect to each state and input (a
+    transition reward's dr/dx_{t+1} is in row t + 1), ``alive`` (M, H + 1) whether step t's
+    reward counts (column H: the terminal reward). Ended episodes are held as in
+    :func:`rollout`; the terminal reward is not included (``reward.terminal``)."""
+    check_protocol(stepper, Stepper, "stepper", STEPPER_FORM)
+    check_protocol(policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
+    check_reward(reward)
+    return _forward(stepper, policy, theta, x0, noise, reward, sigma, True, False, "flag")
+
+
 def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parameters,
-             on_unconverged) -> _Tape:  # fmt: skip
+             on_unconverged) -> Tape:  # fmt: skip
     """The forward pass: check the inputs, step the batch H times, store what the reverse pass
     needs (step Jacobians when ``jacobians``; policy products for a pullback policy)."""
     check_unconverged_policy(on_unconverged)
@@ -279,6 +296,7 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
     Fu = np.empty((M, H, nx, nu)) if jacobians else None
     Fth = np.empty((M, H, nx, len(names))) if parameters else None
     returns = np.zeros(M) if reward is not None else None
+    step_r = np.zeros((M, H)) if reward is not None else None
     rx = np.zeros((M, H + 1, nx)) if (reward is not None and jacobians) else None
     ru = np.zeros((M, H, nu)) if rx is not None else None
     of_transition = reward is not None and isinstance(reward, TransitionReward)
@@ -302,6 +320,7 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
         if reward is not None and not of_transition:
             r, dr_dx, dr_du = reward.stage(x, u)
             returns += r  # in time order, one step at a time
+            step_r[:, t] = r
             if rx is not None:
                 rx[:, t], ru[:, t] = dr_dx, dr_du
         step = stepper.step(x, u, jacobians=jacobians, parameters=parameters)
@@ -317,7 +336,8 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
         if of_transition:
             now = alive[:, t]
             r, dr_dx, dr_du, dr_dxn = reward.transition(x, u, xs[:, t + 1])
-            returns += np.where(now, r, 0.0)  # a step after the end counts nothing
+            step_r[:, t] = np.where(now, r, 0.0)  # a step after the end counts nothing
+            returns += step_r[:, t]
             if rx is not None:
                 rx[:, t] += np.where(now[:, None], dr_dx, 0.0)
                 ru[:, t] = np.where(now[:, None], dr_du, 0.0)
@@ -334,7 +354,8 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
                 Fth[gone, t] = 0.0
     if impulse is None:  # H = 0
         impulse = mu = np.empty((M, 0, 0))
-    return _Tape(xs, us, impulse, mu, conv, Fx, Fu, Fth, names, returns, rx, ru, vjps, alive)
+    return Tape(xs, us, impulse, mu, conv, Fx, Fu, Fth, names, returns, step_r, rx, ru, vjps,
+                 alive)  # fmt: skip
 
 
 def _recomputed_vjp(policy: Policy, theta: np.ndarray, x: np.ndarray):
