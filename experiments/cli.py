@@ -34,6 +34,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "mpc-quadcopter": "mpc_quadcopter",
     "gradient-variance": "gradient_variance",
     "locomotion-variance": "locomotion_variance",
+    "locomotion": "locomotion",
     "bias-return": "bias_return",
     "ball-throw": "ball_throw",
     "smoothing-vs-rs": "smoothing_vs_rs",
@@ -52,6 +53,8 @@ DESCRIPTIONS: dict[str, str] = {
     "gradient-variance": "policy-gradient variance against horizon (Zhang et al. 2023, Fig. 3)",
     "locomotion-variance": "FOPG variance against unroll length, gymnasium's hopper, half-cheetah "
     "(Fig. 3)",
+    "locomotion": "learning hopper and half-cheetah: FOPG-ABS against ARS, PIPPS, AoBG, MBPO, ... "
+    "(Fig. 4)",
     "bias-return": "training with BS and ABS: return and gradient bias (Zhang et al. 2023, Fig. 5)",
     "ball-throw": "learning a throw with ZOPG, FOPG, FOPG-BS, FOPG-ABS (Zhang et al. 2023, 8.3)",
     "smoothing-vs-rs": "barrier against randomised smoothing (Zhang et al. 2023, Fig. 6)",

@@ -328,6 +328,7 @@ def ars_v2_train(
     normalize: bool = True,
     evaluate: bool = True,
     batch_directions: bool = True,
+    callback=None,
 ) -> ArsRun:
     """Train with ARS V2-t (Mania et al. 2018, Algorithm 2); see the module docstring.
 
@@ -346,6 +347,8 @@ def ars_v2_train(
         evaluate: also roll out theta_j each iteration (logged, not counted as env steps, and
             not pushed to the normaliser), and theta at the end.
         batch_directions: run all of an iteration's policies as one batched engine rollout.
+        callback: ``callback(j, theta, policy, row)`` after iteration j's update (e.g. to
+            evaluate the new policy elsewhere); its return value is ignored.
 
     Returns:
         :class:`ArsRun`.
@@ -420,6 +423,8 @@ def ars_v2_train(
             "step_norm": float(np.linalg.norm(step)),
             "seconds": time.perf_counter() - start,
         })  # fmt: skip
+        if callback is not None:
+            callback(j, theta, policy, rows[-1])
     if evaluate:
         returns, used, _, _ = _evaluate(
             obj, policy, theta[None], [obj.noise(rng, m)], batch_directions

@@ -470,7 +470,7 @@ class MbpoRun:
 
 
 def mbpo_train(obj: PolicyObjective, theta0, config: MbpoConfig,
-               rng: np.random.Generator) -> MbpoRun:  # fmt: skip
+               rng: np.random.Generator, callback=None) -> MbpoRun:  # fmt: skip
     """Train the objective's policy MBPO-style (see the module docstring).
 
     Args:
@@ -479,6 +479,8 @@ def mbpo_train(obj: PolicyObjective, theta0, config: MbpoConfig,
         theta0: (P,) initial policy parameters.
         config: :class:`MbpoConfig`.
         rng: numpy Generator (all randomness: noise, bootstrap, model weights, branches).
+        callback: ``callback(j, theta, row)`` after iteration j's policy updates (e.g. to
+            evaluate the policy elsewhere); its return value is ignored.
 
     Returns:
         :class:`MbpoRun` with the logs (real env steps used, returns).
@@ -536,6 +538,8 @@ def mbpo_train(obj: PolicyObjective, theta0, config: MbpoConfig,
             "dropped": int((~traj.used).sum()),
             "seconds": time.perf_counter() - start,
         })  # fmt: skip
+        if callback is not None:
+            callback(j, theta, rows[-1])
     final = obj.rollout(theta, obj.noise(rng, config.real_rollouts), gradient=False)
     rows.append({"iteration": config.iterations,
                  "eval_return": float(final.returns[final.used].mean()),
