@@ -15,6 +15,10 @@ about a millisecond per sample in Python:
 - ``half_cheetah``: run forward: track v_x = 1 m/s while keeping the torso's height and pitch,
   linear feedback around the standing posture (114 parameters), zero at the start; action
   noise sigma = 0.3 N m, Adam step 0.005.
+- ``gym_half_cheetah``: the paper's task on gymnasium's HalfCheetah-v5 model on our plant
+  (:func:`drake_abs.tasks.locomotion.locomotion_task`): v5's reward (forward velocity minus
+  control cost, a reward of transitions), a linear policy of v5's observation (17 -> 6, 108
+  parameters, zero at the start), actions in [-1, 1] with noise sigma = 0.1.
 
 Each design is trained with Adam on FOPG estimates (Zhang et al. 2023, eq. 4.1) from the same
 seeds. The
@@ -55,6 +59,7 @@ from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.policy.training import Adam, train
 
 NAME = "bias-return"
+TASKS = ("hopping_ball", "half_cheetah", "gym_half_cheetah")
 
 DESIGNS: dict[str, SmoothingPolicy] = {
     "BS mu=1e-10": Fixed(1e-10),
@@ -117,6 +122,21 @@ class Config:
             eval_every=5,
         )  # fmt: skip
     )
+    gym_half_cheetah: TrainingSize | None = field(
+        default_factory=lambda: TrainingSize(
+            iterations=30,
+            seeds=(0, 1, 2),
+            samples=16,
+            horizon=60,
+            learning_rate=0.01,
+            checkpoints=(0, 15, 30),
+            bias_batches=8,
+            reference_samples=512,
+            reference_batches=8,
+            eval_rollouts=32,
+            eval_every=3,
+        )  # fmt: skip
+    )
     eval_seed: int = 12345
 
     @classmethod
@@ -136,6 +156,19 @@ class Config:
                 eval_every=2,
             ),  # fmt: skip
             half_cheetah=None,
+            gym_half_cheetah=TrainingSize(
+                iterations=2,
+                seeds=(0,),
+                samples=4,
+                horizon=6,
+                learning_rate=0.01,
+                checkpoints=(0, 2),
+                bias_batches=2,
+                reference_samples=16,
+                reference_batches=2,
+                eval_rollouts=4,
+                eval_every=1,
+            ),  # fmt: skip
         )
 
 
@@ -143,8 +176,8 @@ class Task:
     """A training task: ``objective(smoothing, horizon)`` and the initial ``theta0``."""
 
     def __init__(self, name: str):
-        if name not in ("hopping_ball", "half_cheetah"):
-            raise ValueError(f"task must be 'hopping_ball' or 'half_cheetah'; got {name!r}")
+        if name not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}; got {name!r}")
         self.name = name
         if name == "hopping_ball":
             from drake_abs import point_mass_lcs
@@ -162,6 +195,18 @@ class Task:
             self.x0 = np.array([0.0, 0.3, 0.0, 0.0])
             self.theta0 = spring_theta()
             self.sigma = 1.0
+        elif name == "gym_half_cheetah":
+            from drake_abs.tasks.locomotion import locomotion_task
+
+            task = locomotion_task("half_cheetah")
+            self._stepper = lambda s: (
+                locomotion_task("half_cheetah", smoothing=s, gradient="frozen").stepper
+            )
+            self.policy = task.policy(LinearPolicy(task.n_obs, task.nu))
+            self.reward = task.reward
+            self.x0 = task.x0
+            self.theta0 = np.zeros(self.policy.n_params)
+            self.sigma = 0.1  # action units (actions in [-1, 1])
         else:
             from drake_abs.multibody import build_scene_model
 
@@ -353,7 +398,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     out = results_dir(NAME, out)
     start = time.perf_counter()
     summary = {"config": asdict(config), "tasks": {}, "files": {}}
-    sizes = [getattr(config, name) for name in ("hopping_ball", "half_cheetah")]
+    sizes = [getattr(config, name) for name in TASKS]
     bar = progress(
         total=sum(len(DESIGNS) * len(s.seeds) for s in sizes if s is not None),
         desc="bias-return: training runs",
@@ -362,7 +407,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         # counted per step (unconverged_training_steps); the warnings themselves are noise here
         warnings.simplefilter("ignore", LCPConvergenceWarning)
         warnings.simplefilter("ignore", UnconvergedStepWarning)  # counted as dropped_rollouts
-        for name in ("hopping_ball", "half_cheetah"):
+        for name in TASKS:
             size = getattr(config, name)
             if size is None:
                 continue

@@ -62,6 +62,13 @@ def test_bias_return_test_size_runs_and_writes_files(tmp_path):
     starts = {d["return_mean"][0] for d in designs.values()}
     assert len(starts) == 1
     assert "exact-model return" in bias_return.report(summary)
+    # gymnasium's HalfCheetah-v5 on our plant (the paper's Figure 5 task), at a tiny size
+    gym = summary["tasks"]["gym_half_cheetah"]["designs"]
+    assert gym.keys() == bias_return.DESIGNS.keys()
+    for d in gym.values():
+        assert all(math.isfinite(r) for r in d["return_mean"])
+    assert len({d["return_mean"][0] for d in gym.values()}) == 1  # same start, same exact model
+    assert (tmp_path / "figure5_gym_half_cheetah.png").is_file()
 
 
 def test_bias_return_half_cheetah_path_runs_at_a_tiny_size(tmp_path):
@@ -69,7 +76,9 @@ def test_bias_return_half_cheetah_path_runs_at_a_tiny_size(tmp_path):
         iterations=1, seeds=(0,), samples=2, horizon=4, learning_rate=0.05, checkpoints=(1,),
         bias_batches=2, reference_samples=8, reference_batches=2, eval_rollouts=2, eval_every=1,
     )  # fmt: skip
-    summary = bias_return.run(bias_return.Config(hopping_ball=None, half_cheetah=size), tmp_path)
+    summary = bias_return.run(
+        bias_return.Config(hopping_ball=None, half_cheetah=size, gym_half_cheetah=None), tmp_path
+    )
     designs = summary["tasks"]["half_cheetah"]["designs"]
     for d in designs.values():
         assert all(math.isfinite(r) for r in d["return_mean"])
