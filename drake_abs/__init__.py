@@ -8,11 +8,14 @@ this list (``docs/architecture.md``; ``tests/test_layers.py`` holds the table):
   time-stepping LCP, the one step record;
 - :mod:`drake_abs.engine`: the one closed-loop engine (stepper, policy and reward protocols,
   batched rollouts and their reverse pass);
-- :mod:`drake_abs.policy`: policies, rewards, gradient estimators, training;
-- :mod:`drake_abs.tasks`: the point mass, the translating box, the quadcopter;
+- :mod:`drake_abs.policy`: policies, rewards, gradient estimators (and the baselines PIPPS,
+  ARS V2-t, an MBPO-style loop), training;
 - :mod:`drake_abs.mpc`: differentiable QP-MPC and gray-box tuning;
 - :mod:`drake_abs.multibody`: scenes, MultibodyPlant/pinocchio dynamics, the batched rigid-body
-  step (the only core subpackage that needs pydrake and pinocchio).
+  step (the only core subpackage that needs pydrake and pinocchio);
+- :mod:`drake_abs.tasks`: the point mass, the translating box, the quadcopter, and gymnasium's
+  Hopper-v5 and HalfCheetah-v5 on our plant with a ``gymnasium.Env`` (builds scenes when asked);
+- :mod:`drake_abs.parallel`: Ray: the rollout runner, sweeps, starting or joining a cluster.
 
 On top: Drake systems in :mod:`drake_abs.systems`, diagram builders in :mod:`drake_abs.diagrams`,
 experiments and the CLI in :mod:`drake_abs.experiments`. The names below are the most used ones.
