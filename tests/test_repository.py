@@ -63,3 +63,13 @@ def test_nothing_points_outside_the_repository():
         if outside.search(line)
     ]
     assert not bad, bad
+
+
+def test_test_module_names_are_unique():
+    """pytest imports test modules by basename (no __init__.py in tests/): two folders with the
+    same test file name break collection."""
+    from collections import Counter
+
+    root = Path(__file__).resolve().parent
+    names = Counter(p.name for p in root.rglob("test_*.py"))
+    assert not [n for n, c in names.items() if c > 1], names.most_common(3)
