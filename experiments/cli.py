@@ -9,6 +9,7 @@ Usage::
     drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
                     [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
     drake-abs record SCENE [--steps N] [--out FILE]
+    drake-abs replay POLICY.json [--steps N] [--seed S] [--out FILE]
     drake-abs list
     drake-abs precompile
     drake-abs --version
@@ -41,6 +42,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "speed-accuracy": "speed_accuracy",
     "mujoco-comparison": "mujoco_comparison",
     "scene-recordings": "scene_recordings",
+    "locomotion-transfer": "locomotion_transfer",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 
@@ -61,6 +63,8 @@ DESCRIPTIONS: dict[str, str] = {
     "speed-accuracy": "cost against accuracy of every setting, ours and Drake's",
     "mujoco-comparison": "gymnasium's Hopper and HalfCheetah beside MuJoCo and Drake SAP",
     "scene-recordings": "robots and a pushed box recorded as Meshcat HTML pages",
+    "locomotion-transfer": "policies trained on our plant run in gymnasium's MuJoCo Hopper and "
+    "HalfCheetah",
 }
 
 
@@ -271,6 +275,36 @@ def _record(scene, steps: int, out: str | None) -> int:
     return 0
 
 
+def policy_argument(text: str) -> str:
+    """An argparse type: a saved policy, its STEM.json (or STEM.npz, or STEM), as the JSON's
+    absolute path."""
+    from drake_abs.policy.saving import policy_paths
+
+    json_path, _ = policy_paths(text)
+    if not json_path.is_file():
+        raise argparse.ArgumentTypeError(
+            f"no saved policy {text!r}: give the STEM.json that save_policy wrote"
+        )
+    return str(json_path.resolve())
+
+
+policy_argument.__name__ = "saved policy"
+
+
+def _replay(saved, steps: int | None, seed: int, out: str | None) -> int:
+    from drake_abs.diagrams.policy_replay import replay_policy_html
+
+    stem = Path(saved.path).name.removesuffix(".json")
+    html = Path(out or f"results/{stem}.html").expanduser().resolve()
+    replay = replay_policy_html(saved, html, steps=steps, seed=seed)
+    ep = replay.episode
+    ended = "terminated" if ep.terminated else "not terminated"
+    print(f"replayed {stem} ({replay.task_name}, seed {seed}) on our plant: {ep.steps} steps "
+          f"({ep.seconds:g} s, {ended}), return {ep.total_return:.2f}, forward "
+          f"{ep.forward_distance:+.3f} m (Meshcat, localhost) to {replay.path}")  # fmt: skip
+    return 0
+
+
 def _check_folder(parser: argparse.ArgumentParser, out: str | None) -> None:
     path = None if out is None else Path(out).expanduser()
     if path is not None and path.exists() and not path.is_dir():
@@ -364,6 +398,39 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument(
         "--out", default=None, metavar="FILE", help="HTML file (default: results/SCENE.html)"
     )
+    rep = sub.add_parser(
+        "replay",
+        help="replay a saved policy on our plant as a self-contained HTML page",
+        description="Run a saved policy (written by save_policy, e.g. by the locomotion "
+        "experiments) deterministically on our plant from the state its task's reset gives "
+        "with the seed, and write the Meshcat recording as one HTML page (open it in a "
+        "browser, no server needed). The episode ends where the task ends it (the Hopper "
+        "falling) or after the steps.",
+    )
+    rep.add_argument(
+        "policy",
+        type=policy_argument,
+        metavar="POLICY",
+        help="the saved policy's JSON file (STEM.json, beside its STEM.npz)",
+    )
+    rep.add_argument(
+        "--steps",
+        type=positive_int("--steps", "1000"),
+        default=None,
+        metavar="N",
+        help="time steps to run at most, a positive whole number (default: 1000, "
+        "gymnasium's episode length)",
+    )
+    rep.add_argument(
+        "--seed",
+        type=seed_number,
+        default=0,
+        metavar="S",
+        help="the reset seed: the start state, as gymnasium's reset(seed=S) (default: 0)",
+    )
+    rep.add_argument(
+        "--out", default=None, metavar="FILE", help="HTML file (default: results/STEM.html)"
+    )
     sweep = sub.add_parser(
         "sweep",
         help="run an experiment over seeds and settings, here or on a Ray cluster",
@@ -414,7 +481,9 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     sweep.add_argument("--fresh", action="store_true", help="recompute every point (no resume)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bars")
-    parser.subcommands = {"demo": demo, "experiment": exp, "record": rec, "sweep": sweep}
+    parser.subcommands = {
+        "demo": demo, "experiment": exp, "record": rec, "replay": rep, "sweep": sweep,
+    }  # fmt: skip
 
     sub.add_parser(
         "list",
@@ -457,6 +526,21 @@ def main(argv: list[str] | None = None) -> int:
         except (ValueError, OSError) as err:  # a malformed or unreadable scene file
             sub.error(f"argument SCENE: {err}")
         return _record(scene, args.steps, args.out)
+    if args.command == "replay":
+        if args.out is not None and Path(args.out).expanduser().is_dir():
+            sub.error(f"argument --out: {args.out!r} is a folder; give an HTML file name")
+        from drake_abs.tasks.saved_policies import load_policy
+
+        try:
+            saved = load_policy(args.policy)
+        except (ValueError, OSError) as err:  # not a policy, an unknown kind, a missing npz
+            sub.error(f"argument POLICY: {err}")
+        if saved.task is None:
+            sub.error(
+                f"argument POLICY: {args.policy!r} acts in no task, so there is no scene to "
+                "replay it in: save it with its task (save_policy(..., task='hopper'))"
+            )
+        return _replay(saved, args.steps, args.seed, args.out)
     if args.command == "sweep":
         _check_folder(sub, args.out)
         return _run_sweep(sub, args)

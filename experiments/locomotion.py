@@ -249,6 +249,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                     task,
                     run_["theta"],
                     {"task": name, "method": method, "seed": seed, **asdict(config)},
+                    run_.get("policy"),  # ARS's own policy class; the others: task.policy
                 )
                 csv_rows += [{"task": name, "method": method, "seed": seed, **r}
                              for r in run_["rows"]]  # fmt: skip
@@ -273,20 +274,13 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
 
 
 def _save(stem: Path, task, theta: np.ndarray, config: dict, policy=None) -> None:
-    """Save a final policy (npz + json): the task's linear policy of the observation, or
-    ``policy`` (ARS's normalised linear policy of the state)."""
-    try:
-        from drake_abs.policy.saving import save_policy
-    except ImportError:  # pragma: no cover - until the saving module lands
-        np.savez(stem.with_suffix(".npz"), theta=theta)
-        stem.with_suffix(".json").write_text(json.dumps(config, default=float))
-        return
+    """Save a final policy (npz + json, :func:`drake_abs.policy.saving.save_policy`): the task's
+    linear policy of the observation, or ``policy`` (ARS's normalised linear policy of the
+    state, with its normaliser)."""
+    from drake_abs.policy.saving import save_policy
+
     policy = task.policy(LinearPolicy(task.n_obs, task.nu)) if policy is None else policy
-    try:
-        save_policy(stem, policy, theta, task=task.name, config=config)
-    except ValueError:  # a policy kind the saving module does not know: its parameters at least
-        np.savez(stem.with_suffix(".npz"), theta=theta)
-        stem.with_suffix(".json").write_text(json.dumps(config, default=float))
+    save_policy(stem, policy, theta, task=task.name, config=config)
 
 
 def _curve(runs: list[list[dict]]) -> dict:

@@ -8,6 +8,8 @@ import csv
 import json
 import math
 
+import numpy as np
+
 from drake_abs.experiments import locomotion as loc
 
 
@@ -27,8 +29,19 @@ def test_locomotion_test_size(tmp_path):
             budget = config.iterations * config.rollouts * config.horizon
             if method not in ("ars",):  # ARS runs whole iterations of 2 N rollouts
                 assert c["samples_mean"][-1] <= budget, (name, method)
-    saved = sorted(p.name for p in (tmp_path / "policies").glob("*.json"))
+    saved = sorted((tmp_path / "policies").glob("*.json"))
     assert len(saved) == len(config.tasks) * len(config.methods) * len(config.seeds)
+    # a saved policy reloads as the class it was trained as, with the same actions
+    from drake_abs.policy.ars_v2 import NormalizedLinearPolicy
+    from drake_abs.tasks.saved_policies import load_policy
+
+    ars = load_policy(tmp_path / "policies" / "hopper_ars_seed0.json")
+    assert isinstance(ars.policy, NormalizedLinearPolicy) and ars.acts_on == "state"
+    abs_ = load_policy(tmp_path / "policies" / "hopper_fopg_abs_seed0.json")
+    assert abs_.acts_on == "observation" and abs_.task_name == "hopper"
+    x = abs_.task.initial_states(np.random.default_rng(0), 3)
+    rebuilt = abs_.task.policy(loc.LinearPolicy(abs_.task.n_obs, abs_.task.nu))
+    np.testing.assert_array_equal(abs_.policy.act(abs_.theta, x), rebuilt.act(abs_.theta, x))
     rows = list(csv.DictReader((tmp_path / "curves.csv").open()))
     assert {r["method"] for r in rows} == set(config.methods)
     assert json.loads((tmp_path / "summary.json").read_text())["config"]["seeds"] == [0, 1]
