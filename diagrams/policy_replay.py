@@ -24,7 +24,7 @@ from drake_abs.tasks.saved_policies import Episode, load_policy, reset_state, ru
 
 __all__ = ["DEFAULT_STEPS", "PolicyReplay", "replay_policy_html"]
 
-#: Steps replayed when none are given: gymnasium's episode length.
+#: The steps replayed when none are given (gymnasium's episode length).
 DEFAULT_STEPS = 1000
 
 

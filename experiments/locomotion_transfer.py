@@ -52,7 +52,7 @@ from drake_abs.experiments._common import file_list, progress, results_dir
 
 NAME = "locomotion-transfer"
 TASK_NAMES = ("hopper", "half_cheetah")
-#: The three settings, in order: key -> label.
+#: The three settings (key -> label), in order.
 SETTINGS = {
     "ours": "(a) ours",
     "mujoco_default": "(b) MuJoCo, gymnasium defaults",
@@ -61,7 +61,8 @@ SETTINGS = {
 SMOOTHINGS = ("abs", "scene")
 REFERENCE = "zero action"
 
-#: An actor: (gymnasium's observation (n_obs,), the full state (nx,)) -> action (nu,).
+#: The signature of an actor, which maps gymnasium's observation (n_obs,) and the full state
+#: (nx,) to an action (nu,).
 Actor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 

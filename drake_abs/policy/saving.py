@@ -16,8 +16,8 @@ that made it, the library version).
      "config": {...} | null,
      "library": {"drake-abs": "0.1.0", "numpy": "2.5.5"}}
 
-Only known classes are rebuilt (:data:`POLICY_KINDS`: :class:`~drake_abs.policy.policies.
-LinearPolicy`, :class:`~drake_abs.policy.policies.MLPPolicy`,
+Only known classes are rebuilt (:data:`POLICY_KINDS`:
+:class:`~drake_abs.policy.policies.LinearPolicy`, :class:`~drake_abs.policy.policies.MLPPolicy`,
 :class:`~drake_abs.policy.ars_v2.NormalizedLinearPolicy`, and any registered with
 :func:`register_policy_kind`); nothing is imported by a name read from a file, and a file naming
 another kind is refused (``ValueError`` naming the kind).

@@ -132,7 +132,8 @@ class Episode:
 
     @property
     def forward_distance(self) -> float:
-        """x_T[0] - x_0[0] (m): for the locomotion tasks the distance travelled forward."""
+        """The forward distance travelled, ``x_T[0] - x_0[0]`` in m (for the locomotion
+        tasks)."""
         return float(self.states[-1, 0] - self.states[0, 0])
 
 
