@@ -26,13 +26,15 @@ the samples counted are the environment steps that count, fewer when the Hopper 
 
 Each baseline module states where it follows its paper and where it departs.
 
-The gradient methods step with Adam (``learning_rate``). After every iteration the policy is
-evaluated on the true system (exact contact, whatever model the method trains on),
-deterministically (no exploration noise), from ``eval_episodes`` of gymnasium's reset
-states (drawn once per task with ``eval_seed``) over ``eval_horizon`` steps; the curves are that
-return against cumulative training samples and against wall time, mean and spread (min-max)
-over the seeds. Every final policy is saved in ``policies/`` (npz + json) and can be replayed
-(``drake-abs replay``).
+The gradient methods step with Adam (``learning_rate``). An iteration whose estimate has no
+usable rollout (every rollout took an unconverged solver step) or is not finite makes no update;
+its samples count as spent, and the summary counts such iterations (``skipped_iterations``).
+After every iteration the policy is evaluated on the true system (exact contact, whatever model
+the method trains on), deterministically (no exploration noise), from ``eval_episodes`` of
+gymnasium's reset states (drawn once per task with ``eval_seed``) over ``eval_horizon`` steps;
+the curves are that return against cumulative training samples and against wall time, mean and
+spread (min-max) over the seeds. Every final policy is saved in ``policies/`` (npz + json) and
+can be replayed (``drake-abs replay``).
 
 Outputs in ``out``: ``figure4_<task>.png`` (return against samples and against seconds),
 ``curves.csv`` (every evaluation), ``summary.json``, ``policies/``.
@@ -50,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.unconverged import UnconvergedStepError
 from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.policy.ars_v2 import PUBLISHED_SETTINGS, NormalizedLinearPolicy, ars_v2_train
 from drake_abs.policy.estimators import PolicyObjective, alpha_order, first_order, zeroth_order
@@ -150,11 +153,22 @@ def train_method(task, method: str, config: Config, seed: int, x_eval: np.ndarra
     rows = [{"iteration": 0, "samples": 0, "seconds": 0.0,
              "return": evaluate(true_task, theta, x_eval, config.eval_horizon)}]  # fmt: skip
     samples, seconds = 0, 0.0
+    skipped = 0
     for k in range(config.iterations):
         start = time.perf_counter()
-        est = estimator(obj, theta, rng)
-        if not np.all(np.isfinite(est.grad)):
-            raise FloatingPointError(f"{task.name} {method} seed {seed}: non-finite gradient")
+        try:
+            est = estimator(obj, theta, rng)
+            if not np.all(np.isfinite(est.grad)):
+                raise FloatingPointError("non-finite gradient estimate")
+        except (UnconvergedStepError, FloatingPointError):
+            # no usable rollout (every one took an unconverged step) or a non-finite estimate:
+            # the iteration's samples are spent (counted as the whole batch), theta is kept
+            skipped += 1
+            seconds += time.perf_counter() - start
+            samples += config.rollouts * config.horizon
+            rows.append({"iteration": k + 1, "samples": samples, "seconds": seconds,
+                         "return": rows[-1]["return"], "skipped": True})  # fmt: skip
+            continue
         theta = optimizer.step(theta, est.grad)
         seconds += time.perf_counter() - start
         samples += est.env_steps
@@ -162,7 +176,7 @@ def train_method(task, method: str, config: Config, seed: int, x_eval: np.ndarra
                      "return": evaluate(true_task, theta, x_eval, config.eval_horizon),
                      "batch_return": est.value, "dropped": est.dropped,
                      "grad_norm": float(np.linalg.norm(est.grad))})  # fmt: skip
-    return {"rows": rows, "theta": theta}
+    return {"rows": rows, "theta": theta, "skipped": skipped}
 
 
 def _train_ars(task, config: Config, seed: int, x_eval, true_task) -> dict:
@@ -240,10 +254,11 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                                           config.eval_episodes)  # fmt: skip
         for method in config.methods:
             task = locomotion_task(name, smoothing=smoothing_of(method, config))
-            runs = []
+            runs, skipped = [], []
             for seed in config.seeds:
                 run_ = train_method(task, method, config, seed, x_eval, true_task)
                 runs.append(run_["rows"])
+                skipped.append(run_.get("skipped", 0))
                 _save(
                     out / "policies" / f"{name}_{method}_seed{seed}",
                     task,
@@ -256,7 +271,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                 bar.set_postfix_str(f"{name} {method} seed {seed}: "
                                     f"{run_['rows'][-1]['return']:.3g}")  # fmt: skip
                 bar.update()
-            results[name][method] = _curve(runs)
+            results[name][method] = _curve(runs) | {"skipped_iterations": skipped}
     bar.close()
     files = {"summary": out / "summary.json", "curves": out / "curves.csv"}
     for name in config.tasks:
