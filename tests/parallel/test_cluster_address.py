@@ -6,7 +6,6 @@ without the cluster's token is an error that says what to set."""
 from __future__ import annotations
 
 import json
-import math
 import os
 import signal
 import socket
@@ -16,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+from summary_numbers import assert_same_numbers
 
 pytest.importorskip("ray")
 
@@ -71,27 +71,8 @@ def _run(args, **env) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600)  # fmt: skip
 
 
-def _numbers(value, path=""):
-    if isinstance(value, dict):
-        for key, item in value.items():
-            if not any(t in key for t in TIMING):
-                yield from _numbers(item, f"{path}.{key}")
-    elif isinstance(value, list):
-        for i, item in enumerate(value):
-            yield from _numbers(item, f"{path}[{i}]")
-    elif isinstance(value, int | float) and not isinstance(value, bool):
-        yield path, value
-
-
 def _same_numbers(a: dict, b: dict) -> None:
-    x, y = dict(_numbers(a)), dict(_numbers(b))
-    assert x.keys() == y.keys() and len(x) > 10
-    differ = [
-        (k, x[k], y[k]) for k in x
-        if not (x[k] == y[k] or (math.isnan(x[k]) and math.isnan(y[k])))
-        and not math.isclose(x[k], y[k], rel_tol=1e-12)
-    ]  # fmt: skip
-    assert not differ, differ[:5]
+    assert_same_numbers(a, b, skip=TIMING, at_least=11)
 
 
 def test_the_heads_listeners_are_on_the_loopback_interface(head):
