@@ -215,30 +215,55 @@ def _run_standard(name: str, out: Path | None, *, test_size: bool, ray: bool = F
     return 0
 
 
+def add_ray_options(parser: argparse.ArgumentParser, ray_help: str) -> None:
+    """``--ray`` (with ``ray_help``), ``--address`` and ``--workers``, the same on every command
+    that can run on Ray."""
+    parser.add_argument("--ray", action="store_true", help=ray_help)
+    parser.add_argument(
+        "--address", default=None, metavar="ADDR",
+        help="join this Ray cluster (auto, HOST:6379 or ray://HOST:10001; implies --ray)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--workers", type=positive_int("--workers", "4"), default=None, metavar="N",
+        help="CPUs of the local Ray cluster (implies --ray; default: all)",
+    )  # fmt: skip
+
+
+def wants_ray(sub: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
+    """Whether the Ray options ask for Ray; a usage error (exit 2) for ``--workers`` with
+    ``--address``, or when Ray is asked for but not installed."""
+    if args.address is not None and args.workers is not None:
+        sub.error("argument --workers: sets the CPUs of a local Ray cluster; a cluster joined "
+                  "with --address has its own")  # fmt: skip
+    on_ray = args.ray or args.address is not None or args.workers is not None
+    if on_ray:
+        from drake_abs.parallel.cluster import require_ray
+
+        try:
+            require_ray()
+        except ImportError as err:
+            sub.error(f"argument --ray: {err}")
+    return on_ray
+
+
 def _run_sweep(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     """The sweep subcommand: build the grid (argument errors exit 2), run it, print the report;
     1 if a point failed (everything is written first)."""
     from drake_abs.experiments.sweep import ExperimentPoint, GridError, build_grid, report
     from drake_abs.parallel.sweep import run_sweep
 
-    if args.address is not None and args.workers is not None:
-        sub.error("argument --workers: sets the CPUs of a local Ray cluster; a cluster joined "
-                  "with --address has its own")  # fmt: skip
+    on_ray = wants_ray(sub, args)
     try:
         points = build_grid(args.name, seeds=args.seeds, settings=args.settings,
                             test_size=args.test_size)  # fmt: skip
     except GridError as err:
         sub.error(f"argument {err.argument}: {err}")
     out = Path(args.out or f"results/sweep-{args.name}").expanduser().resolve()
-    on_ray = args.ray or args.address is not None or args.workers is not None
-    try:
-        result = run_sweep(
-            ExperimentPoint(args.name, args.test_size), points, out,
-            backend="ray" if on_ray else "local", address=args.address, num_cpus=args.workers,
-            resume=not args.fresh, progress=not args.no_progress, metric=args.metric,
-        )  # fmt: skip
-    except ImportError as err:  # Ray asked for but not installed
-        sub.error(f"argument --ray: {err}")
+    result = run_sweep(
+        ExperimentPoint(args.name, args.test_size), points, out,
+        backend="ray" if on_ray else "local", address=args.address, num_cpus=args.workers,
+        resume=not args.fresh, progress=not args.no_progress, metric=args.metric,
+    )  # fmt: skip
     print(report(result))
     print(f"results written to {out}")
     if result.metric_error:
@@ -363,18 +388,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     exp.add_argument("--test-size", action="store_true", help="the reduced size CI runs")
     exp.add_argument("--no-progress", action="store_true", help="no progress bars")
-    exp.add_argument(
-        "--ray", action="store_true",
-        help="run the estimators' rollouts on Ray actors (a local cluster on 127.0.0.1)",
-    )  # fmt: skip
-    exp.add_argument(
-        "--address", default=None, metavar="ADDR",
-        help="join this Ray cluster (auto, HOST:6379 or ray://HOST:10001; implies --ray)",
-    )  # fmt: skip
-    exp.add_argument(
-        "--workers", type=positive_int("--workers", "4"), default=None, metavar="N",
-        help="CPUs of the local Ray cluster (implies --ray; default: all)",
-    )  # fmt: skip
+    add_ray_options(
+        exp, "run the estimators' rollouts on Ray actors (a local cluster on 127.0.0.1)"
+    )
 
     rec = sub.add_parser(
         "record",
@@ -464,17 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument(
         "--out", default=None, metavar="DIR", help="results folder (default: results/sweep-NAME)"
     )
-    sweep.add_argument(
-        "--ray", action="store_true", help="run the points as Ray tasks on a local cluster"
-    )
-    sweep.add_argument(
-        "--address", default=None, metavar="ADDR",
-        help="join this Ray cluster (auto, HOST:6379 or ray://HOST:10001; implies --ray)",
-    )  # fmt: skip
-    sweep.add_argument(
-        "--workers", type=positive_int("--workers", "4"), default=None, metavar="N",
-        help="CPUs of the local Ray cluster (implies --ray; default: all)",
-    )  # fmt: skip
+    add_ray_options(sweep, "run the points as Ray tasks on a local cluster")
     sweep.add_argument(
         "--metric", default=None, metavar="KEY",
         help="the numeric column of sweep.csv to plot (default: the first that varies)",
@@ -559,18 +565,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.name is None:
         sub.error("the following arguments are required: NAME (see 'drake-abs list')")
     _check_folder(sub, args.out)
-    if args.address is not None and args.workers is not None:
-        sub.error("argument --workers: sets the CPUs of a local Ray cluster; a cluster joined "
-                  "with --address has its own")  # fmt: skip
+    on_ray = wants_ray(sub, args)
     out = None if args.out is None else Path(args.out)
-    on_ray = args.ray or args.address is not None or args.workers is not None
-    if on_ray:
-        try:
-            from drake_abs.parallel.cluster import require_ray
-
-            require_ray()
-        except ImportError as err:
-            sub.error(f"argument --ray: {err}")
     return _run_standard(args.name, out, test_size=args.test_size, ray=on_ray,
                          address=args.address, workers=args.workers)  # fmt: skip
 
