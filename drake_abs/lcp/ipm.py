@@ -44,10 +44,14 @@ point stalled or diverged, as on Csizmadia's P-matrices at d >= 32, whose handic
 exponential in d) goes through :mod:`drake_abs.lcp.pivoting`: the active set is guessed from
 its last iterate (then from ``q < 0``), corrected by principal pivots to an exact solution of
 the mu = 0 LCP, and the compiled iterations are run again from a point next to it whose products
-are the requested targets. That answer replaces the old one only if it passes the same test
-below; ``result.pivots`` and ``result.polished`` report it. At mu = 0 this finishes P-matrix
-problems whatever their conditioning (pivoting is finite for P-matrices; the pivot budget
-``PIVOTS_PER_CONTACT d + PIVOTS_EXTRA`` bounds the work). At mu > 0 the exact solution is only a
+are the requested targets. Where principal pivoting fails (a singular ``F_AA`` or cycling, as on
+the copositive friction matrices), Lemke's method (:mod:`drake_abs.lcp.lemke`) supplies the
+active set instead. That answer replaces the old one only if it passes the same test below;
+``result.pivots`` and ``result.polished`` report it. At mu = 0 this finishes P-matrix problems
+whatever their conditioning (pivoting is finite for P-matrices; the pivot budget
+``PIVOTS_PER_CONTACT d + PIVOTS_EXTRA`` bounds the work), and Stewart-Trinkle friction problems
+that the interior point leaves (on gymnasium's HalfCheetah, 55 of 55 such steps in a test run:
+cond(F) near 1e17, the symmetric part indefinite). At mu > 0 the exact solution is only a
 start for the centring steps to mu: attempted, verified, often not enough (it is measured in
 ``benchmarks/bench_lcp.py``). It costs nothing on problems that converge.
 
@@ -87,6 +91,7 @@ import numpy as np
 
 from drake_abs._validation import as_finite_array
 from drake_abs.lcp.ipm_kernel import solve
+from drake_abs.lcp.lemke import lemke_active_set
 from drake_abs.lcp.matrix_class import MatrixClass, classify_matrix
 from drake_abs.lcp.pivoting import active_guess, central_start, solve_by_pivoting
 from drake_abs.lcp.sensitivity import implicit_jacobians
@@ -512,32 +517,53 @@ def _crossover(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone,
     iterations meet the usual test ``residual <= tol``: for mu = 0 that is a check of the exact
     solution at the exact floor (0 iterations when it passes at once); for mu > 0 the exact
     solution is only a starting point for the centring steps to mu, attempted and verified the
-    same way. ``pivots`` (B,) receives the pivot steps spent, ``polished`` (B,) marks answers
-    that were replaced.
+    same way. The problems still unsolved then get a second candidate, from the active set where
+    Lemke's method ends (:func:`~drake_abs.lcp.lemke.lemke_active_set`), verified the same way.
+    ``pivots`` (B,) receives the pivot steps spent, ``polished`` (B,) marks answers that were
+    replaced.
     """
-    status, iterations, _, lam_out, s_out, _, mu_target, _ = out
-    failed = np.flatnonzero(status != LCPStatus.CONVERGED)
-    if not failed.size:
-        return
+    status = out[0]
     d = Q.shape[1]
     budget = PIVOTS_PER_CONTACT * d + PIVOTS_EXTRA
     eta = SIGN_TEST_ULPS * d * np.finfo(float).eps
-    D, _, _ = _scales(F3 if shared else F3[failed], shared, Q[failed])
-    rows, starts = [], []
-    for k, b in enumerate(failed):
+
+    def principal(b, k, D):
+        guesses = [active_guess(out[3][b], out[4][b], D[k]), Q[b] < 0]
+        return solve_by_pivoting(F3[0] if shared else F3[b], Q[b], guesses, max_pivots=budget,
+                                 eta=eta)  # fmt: skip
+
+    def lemke(b, k, D):
         Fb = F3[0] if shared else F3[b]
-        guesses = [active_guess(lam_out[b], s_out[b], D[k]), Q[b] < 0]
-        found, spent = solve_by_pivoting(Fb, Q[b], guesses, max_pivots=budget, eta=eta)
-        pivots[b] += spent
-        if not found.ok:
-            continue
-        lam0, s0 = central_start(found.lam, found.w, mu_target[b])
-        if np.all(np.isfinite(lam0) & np.isfinite(s0) & (lam0 > 0) & (s0 > 0)):
-            rows.append(b)
-            starts.append((lam0, s0))
-    if not rows:
-        return
-    rows = np.asarray(rows)
+        guess, spent = lemke_active_set(Fb, Q[b], max_pivots=budget)
+        if guess is None:
+            return None, spent
+        found, more = solve_by_pivoting(Fb, Q[b], [guess], max_pivots=budget, eta=eta)
+        return found, spent + more
+
+    for candidate in (principal, lemke):
+        failed = np.flatnonzero(status != LCPStatus.CONVERGED)
+        if not failed.size:
+            return
+        D, _, _ = _scales(F3 if shared else F3[failed], shared, Q[failed])
+        rows, starts = [], []
+        for k, b in enumerate(failed):
+            found, spent = candidate(b, k, D)
+            pivots[b] += spent
+            if found is None or not found.ok:
+                continue
+            lam0, s0 = central_start(found.lam, found.w, out[6][b])
+            if np.all(np.isfinite(lam0) & np.isfinite(s0) & (lam0 > 0) & (s0 > 0)):
+                rows.append(b)
+                starts.append((lam0, s0))
+        if rows:
+            _verify(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, out,
+                    polished, np.asarray(rows), starts)  # fmt: skip
+
+
+def _verify(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, out, polished,
+            rows, starts) -> None:  # fmt: skip
+    """Run the compiled iterations on the problems ``rows`` from ``starts`` ((lam0, s0) each);
+    an answer that converges replaces the one in ``out`` and is marked ``polished``."""
     lam0 = np.ascontiguousarray(np.stack([a for a, _ in starts]))
     s0 = np.ascontiguousarray(np.stack([b for _, b in starts]))
     sub_F = F3 if shared else F3[rows]
@@ -545,10 +571,10 @@ def _crossover(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone,
                   np.ascontiguousarray(mu_full[rows]), exact_tol, tol, max_iterations,
                   np.ascontiguousarray(monotone[rows]), lam0, s0, True)  # fmt: skip
     took = (again[0] == LCPStatus.CONVERGED) & again[7]
-    total = iterations[rows] + again[1]
+    total = out[1][rows] + again[1]
     for arr, new in zip(out, again, strict=True):
         arr[rows[took]] = new[took]
-    iterations[rows] = total
+    out[1][rows] = total
     polished[rows[took]] = True
 
 

@@ -346,9 +346,11 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
             use_corr = stalls < STALLS_BEFORE_NO_CORRECTOR and not no_corr
             if not use_corr:
                 no_corr = True
-            # (6) corrector: centre on max(sigma mu, mu_i), never below the requested target
+            # (6) corrector: centre on max(sigma mu, mu_i), never below the requested target; a
+            # contact already at its target (not driving) is held there exactly (step 3), since
+            # sigma mu_cur, the mean of the others, can lie above it when targets differ
             for i in range(d):
-                t = max(sigma * mu_cur, ma[i])
+                t = max(sigma * mu_cur, ma[i]) if drive[i] else ma[i]
                 target[i] = t
                 corr = dl_aff[i] * ds_aff[i] if (t > ma[i] and use_corr) else 0.0
                 rhs[i] = (L[i] * rp[i] - (gap[i] - t + corr)) * w[i]

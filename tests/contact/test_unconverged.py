@@ -78,16 +78,17 @@ class _RowMu(SmoothingPolicy):
 
 
 def test_an_lcs_step_that_does_not_converge_takes_the_exact_step(monkeypatch):
-    """The same fallback as the rigid-body step: a solo12 standing step's frictional LCP (24
-    rows, mu 1e-4 on the normal rows and 1e-2 on the friction rows), which the default start
-    alone does not solve, as an LCS whose state records the impulse. The unconverged step's
-    next state is the exact step's (flagged), not the unconverged iterate."""
+    """The same fallback as the rigid-body step: a frictional LCP of gymnasium's HalfCheetah
+    on our plant (22 rows, one mu on the normal rows and 100 times it on the friction rows,
+    from a fixed-mu rollout), which the default start alone does not solve, as an LCS whose
+    state records the impulse. The unconverged step's next state is the exact step's
+    (flagged), not the unconverged iterate."""
     from pathlib import Path
 
     from drake_abs import LCS, Exact
     from drake_abs.lcp import ipm
 
-    data = np.load(Path(__file__).with_name("solo12_standing_lcp.npz"))
+    data = np.load(Path(__file__).with_name("half_cheetah_step_lcp.npz"))
     d = data["z"].size
     lcs = LCS(A=np.eye(d), B=np.zeros((d, 1)), C=np.eye(d), c=np.zeros(d), D=np.zeros((d, d)),
               E=np.zeros((d, 1)), F=data["F"], d=data["z"], on_bad_matrix="attempt")  # fmt: skip

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from drake_abs.contact.smoothing import Fixed
-from drake_abs.contact.unconverged import UnconvergedStepWarning
 from drake_abs.experiments import smoothing_vs_rs as srs
 
 CONFIG = srs.Config.test_size()
@@ -101,11 +100,12 @@ def test_pushed_box_gradients_exact_rs_and_bs():
     # second starts; the gradient is a smooth sigmoid across the threshold
     _, g6, conv6 = srs.push_gradients(CONFIG, ug, Fixed(1e-6))
     assert conv6.all() and np.all(np.diff(g6) > 0)
-    # mu = 1e-4: some pushes' frictional steps still do not converge (this non-monotone LCP is
-    # attempted, not guaranteed): their derivatives are NaN, never reported as values
-    with pytest.warns(UnconvergedStepWarning):
-        _, g4, conv4 = srs.push_gradients(CONFIG, ug, Fixed(1e-4))
-    assert not conv4.all() and np.isnan(g4[~conv4]).all() and np.isfinite(g4[conv4]).all()
+    # mu = 1e-4: every push converges since the solver holds a contact at its own target (the
+    # friction rows' mu / h is 100 times the normal rows' mu; 10 of 121 pushes failed before),
+    # and the gradient is a flatter sigmoid than at 1e-5 (larger mu: more smoothing)
+    _, g4, conv4 = srs.push_gradients(CONFIG, ug, Fixed(1e-4))
+    assert conv4.all() and np.all(np.diff(g4) > 0)
+    assert g4[-1] - g4[0] < g_bs[-1] - g_bs[0]
 
 
 def test_experiment_writes_its_results(tmp_path):
