@@ -11,6 +11,8 @@ this list (``docs/architecture.md``; ``tests/test_layers.py`` holds the table):
 - :mod:`drake_abs.policy`: policies, rewards, gradient estimators (and the baselines PIPPS,
   ARS V2-t, an MBPO-style loop), training;
 - :mod:`drake_abs.mpc`: differentiable QP-MPC and gray-box tuning;
+- :mod:`drake_abs.learning`: learning contact models from data (the violation-implicit loss,
+  the ground-height toy of Bianchini et al. 2022, generalisation bounds);
 - :mod:`drake_abs.multibody`: scenes, MultibodyPlant/pinocchio dynamics, the batched rigid-body
   step (the only core subpackage that needs pydrake and pinocchio);
 - :mod:`drake_abs.tasks`: the point mass, the translating box, the quadcopter, and gymnasium's

@@ -43,6 +43,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "mujoco-comparison": "mujoco_comparison",
     "scene-recordings": "scene_recordings",
     "locomotion-transfer": "locomotion_transfer",
+    "implicit-learning": "implicit_learning",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 
@@ -65,6 +66,8 @@ DESCRIPTIONS: dict[str, str] = {
     "scene-recordings": "robots and a pushed box recorded as Meshcat HTML pages",
     "locomotion-transfer": "policies trained on our plant run in gymnasium's MuJoCo Hopper and "
     "HalfCheetah",
+    "implicit-learning": "learning a ground height: explicit, naive and violation implicit losses "
+    "(Bianchini et al. 2022, Table 1, Figs. 1 and 3)",
 }
 
 

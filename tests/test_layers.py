@@ -35,6 +35,11 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         },
         set(),
     ),
+    "drake_abs/learning": (
+        "drake_abs.learning",
+        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine"},
+        set(),
+    ),
     "drake_abs/mpc": ("drake_abs.mpc", {"drake_abs.contact", "drake_abs.engine"}, {"osqp"}),
     "drake_abs/parallel": (
         "drake_abs.parallel",

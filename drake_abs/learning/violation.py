@@ -1,0 +1,205 @@
+"""The violation-implicit loss of Bianchini et al. (2022, eq. 4) for models whose prediction is
+affine in the contact impulses, batched over data points, with its gradient in the parameters.
+
+For one data point (input x, observed output y) and parameters theta the model supplies
+
+- the prediction ``g(lam) = g0 + D lam`` ((ny,) from nl impulses; ``g0`` and ``D`` may depend
+  on theta and x), and
+- each impulse's complementarity partner ``phi`` (nl,), evaluated at the *observed* output
+  (e.g. the gap at the end of the step computed from the observed velocity), independent of lam.
+
+The loss is the smallest value over lam of ::
+
+    J(lam) = ||y - g0 - D lam||^2 + (1 / eps) h(phi, lam),
+    h(phi, lam) = sum_i 1/2 neg(phi_i)^2 + 1/2 neg(lam_i)^2 + pos(phi_i) pos(lam_i),
+
+with ``pos(a) = max(a, 0)`` and ``neg(a) = -min(a, 0)``. h is zero exactly when ``lam`` and
+``phi`` are complementary (``lam >= 0``, ``phi >= 0``, ``lam_i phi_i = 0``). **A larger eps
+relaxes the complementarity** (the loss trusts the prediction term more); as eps -> 0 the
+loss tends to the prediction loss through the complementarity solution.
+
+For fixed ``phi``, ``J`` is convex in ``lam``: a convex quadratic plus, per impulse, the convex
+``1/2 neg(lam_i)^2 + pos(phi_i) pos(lam_i)`` (``pos(phi_i) >= 0``). It is minimised here by
+exact coordinate descent (each coordinate's one-dimensional minimiser is closed-form: the
+negative branch, the positive branch, or 0), which converges for such separable nonsmooth
+convex terms, to ``tol`` in the change of J's subgradient optimality, then the loss and its
+gradient are evaluated at the minimiser. By the envelope theorem the gradient of the loss in
+theta is the partial derivative of ``J`` at the minimiser (``lam`` held), whatever the
+minimiser's own derivative: ::
+
+    dl/dtheta = -2 (y - g)^T (dg0/dtheta + dD/dtheta lam)
+                + (1 / eps) sum_i (-neg(phi_i) + pos(lam_i) [phi_i > 0]) dphi_i/dtheta.
+
+Shapes: batch B, outputs ny, impulses nl, parameters T.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ViolationLoss:
+    """The violation-implicit loss of a batch.
+
+    Attributes:
+        loss: (B,) the minimum of J per data point.
+        grad: (B, T) its gradient in theta (None when no parameter derivatives were given).
+        lam: (B, nl) the minimising impulses.
+        prediction: (B,) the prediction term ``||y - g(lam)||^2`` at the minimiser.
+        violation: (B,) ``h(phi, lam)`` at the minimiser (not divided by eps).
+        sweeps: coordinate-descent sweeps taken.
+        converged: (B,) the minimiser met the optimality test.
+    """
+
+    loss: np.ndarray
+    grad: np.ndarray | None
+    lam: np.ndarray
+    prediction: np.ndarray
+    violation: np.ndarray
+    sweeps: int
+    converged: np.ndarray
+
+
+def pos(a: np.ndarray) -> np.ndarray:
+    """The positive part ``max(a, 0)``."""
+    return np.maximum(a, 0.0)
+
+
+def neg(a: np.ndarray) -> np.ndarray:
+    """The negative part ``-min(a, 0)`` (>= 0)."""
+    return -np.minimum(a, 0.0)
+
+
+def complementarity_violation(phi: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """``h(phi, lam)`` (B,) of the module docstring, summed over the last axis: zero exactly
+    for a complementary pair."""
+    return np.sum(0.5 * neg(phi) ** 2 + 0.5 * neg(lam) ** 2 + pos(phi) * pos(lam), axis=-1)
+
+
+def violation_loss(
+    y: np.ndarray,
+    g0: np.ndarray,
+    D: np.ndarray,
+    phi: np.ndarray,
+    eps: float,
+    *,
+    dg0: np.ndarray | None = None,
+    dD: np.ndarray | None = None,
+    dphi: np.ndarray | None = None,
+    tol: float = 1e-12,
+    max_sweeps: int = 500,
+) -> ViolationLoss:
+    """The violation-implicit loss (module docstring) of a batch and, when any of ``dg0``,
+    ``dD``, ``dphi`` is given, its gradient in theta.
+
+    Args:
+        y: (B, ny) observed outputs. g0: (B, ny) prediction at lam = 0. D: (B, ny, nl).
+        phi: (B, nl) complementarity partners at the observed outputs.
+        eps: > 0, the weight of the violation term is 1 / eps (larger eps: looser
+            complementarity).
+        dg0: (B, ny, T), dD: (B, ny, nl, T), dphi: (B, nl, T): derivatives in theta (absent
+            ones are zero).
+        tol: optimality tolerance, relative to the size of the prediction term's gradient.
+        max_sweeps: coordinate-descent sweeps allowed.
+    """
+    y, g0, D, phi = (np.asarray(a, dtype=float) for a in (y, g0, D, phi))
+    if y.ndim != 2 or g0.shape != y.shape:
+        raise ValueError(f"y and g0 must both have shape (B, ny); got {y.shape} and {g0.shape}")
+    B, ny = y.shape
+    if D.ndim != 3 or D.shape[:2] != (B, ny):
+        raise ValueError(f"D must have shape (B, ny, nl) = ({B}, {ny}, nl); got {D.shape}")
+    nl = D.shape[2]
+    if phi.shape != (B, nl):
+        raise ValueError(f"phi must have shape (B, nl) = ({B}, {nl}); got {phi.shape}")
+    if not (np.isfinite(eps) and eps > 0):
+        raise ValueError(f"eps must be a finite number > 0; got {eps!r}")
+    for name, a in (("y", y), ("g0", g0), ("D", D), ("phi", phi)):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite")
+    r0 = y - g0  # residual at lam = 0
+    p = pos(phi) / eps  # the linear weight of a positive impulse
+    w = 1.0 / eps  # the quadratic weight of a negative impulse
+    col = np.einsum("bji,bji->bi", D, D)  # ||D_i||^2
+    lam = np.zeros((B, nl))
+    r = r0.copy()
+    scale = (1.0 + np.sqrt(col.max(axis=1))) * (1.0 + np.sqrt(np.einsum("bj,bj->b", r0, r0)))
+    scale = scale + p.max(axis=1, initial=0.0)
+    converged = np.zeros(B, dtype=bool)
+    sweeps = 0
+    for sweeps in range(1, max_sweeps + 1):
+        for i in range(nl):
+            Di = D[:, :, i]
+            # J along coordinate i: ||r + D_i lam_i - D_i t||^2 + branch terms in t
+            c = np.einsum("bj,bj->b", Di, r) + col[:, i] * lam[:, i]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_pos = np.where(col[:, i] > 0, (c - 0.5 * p[:, i]) / col[:, i], 0.0)
+                t_neg = c / (col[:, i] + 0.5 * w)
+            t = np.where(t_pos > 0, t_pos, np.where(t_neg < 0, t_neg, 0.0))
+            r -= Di * (t - lam[:, i])[:, None]
+            lam[:, i] = t
+        converged = _optimality(D, r, lam, p, w) <= tol * scale
+        if converged.all():
+            break
+        if nl > 1:  # the sign pattern is usually right long before the values: solve on it
+            for b in np.flatnonzero(~converged):
+                polished = _solve_on_pattern(D[b], r0[b], lam[b], p[b], w)
+                if polished is not None:
+                    lam[b] = polished
+                    r[b] = r0[b] - D[b] @ polished
+            converged = _optimality(D, r, lam, p, w) <= tol * scale
+            if converged.all():
+                break
+    prediction = np.einsum("bj,bj->b", r, r)
+    violation = complementarity_violation(phi, lam)
+    loss = prediction + violation / eps
+    grad = None
+    if dg0 is not None or dD is not None or dphi is not None:
+        T = next(a.shape[-1] for a in (dg0, dD, dphi) if a is not None)
+        grad = np.zeros((B, T))
+        dg = np.zeros((B, ny, T))
+        if dg0 is not None:
+            dg += dg0
+        if dD is not None:
+            dg += np.einsum("bjit,bi->bjt", dD, lam)
+        grad -= 2.0 * np.einsum("bj,bjt->bt", r, dg)
+        if dphi is not None:
+            dh_dphi = -neg(phi) + pos(lam) * (phi > 0)
+            grad += np.einsum("bi,bit->bt", dh_dphi, dphi) / eps
+    return ViolationLoss(loss, grad, lam, prediction, violation, sweeps, converged)
+
+
+def _optimality(D, r, lam, p, w) -> np.ndarray:
+    """(B,) the largest violation of the minimum's optimality conditions over the impulses:
+    with ``g_i = -2 D_i^T r`` the gradient of the prediction term, ``g_i + p_i = 0`` for a
+    positive impulse, ``g_i + w lam_i = 0`` for a negative one, ``-p_i <= g_i <= 0`` at 0."""
+    g = -2.0 * np.einsum("bji,bj->bi", D, r)
+    res = np.where(lam > 0, np.abs(g + p), np.where(lam < 0, np.abs(g + w * lam),
+                                                     np.maximum(g, 0.0) + pos(-p - g)))  # fmt: skip
+    return res.max(axis=1)
+
+
+def _solve_on_pattern(D, r0, lam, p, w) -> np.ndarray | None:
+    """The stationary point on the sign pattern of ``lam`` (one data point), or None if it
+    leaves that pattern: ``(2 D_S^T D_S + w I_N) lam_S = 2 D_S^T r0 - p_P`` over the nonzero
+    impulses S (P positive, N negative), zero elsewhere."""
+    S = np.flatnonzero(lam != 0)
+    if not S.size:
+        return None
+    DS = D[:, S]
+    K = 2.0 * DS.T @ DS
+    rhs = 2.0 * DS.T @ r0
+    negative = lam[S] < 0
+    K[np.diag_indices(S.size)] += np.where(negative, w, 0.0)
+    rhs -= np.where(negative, 0.0, p[S])
+    try:
+        x = np.linalg.solve(K, rhs)
+    except np.linalg.LinAlgError:
+        return None
+    if np.any((x > 0) == negative) or np.any(x == 0):
+        return None
+    out = np.zeros_like(lam)
+    out[S] = x
+    return out
