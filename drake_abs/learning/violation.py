@@ -129,7 +129,8 @@ def violation_loss(
     scale = scale + p.max(axis=1, initial=0.0)
     converged = np.zeros(B, dtype=bool)
     sweeps = 0
-    for sweeps in range(1, max_sweeps + 1):
+    while sweeps < max_sweeps:
+        sweeps += 1
         for i in range(nl):
             Di = D[:, :, i]
             # J along coordinate i: ||r + D_i lam_i - D_i t||^2 + branch terms in t

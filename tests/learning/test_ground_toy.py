@@ -86,8 +86,8 @@ def test_naive_implicit_equals_explicit_with_shared_parameters():
 
 def test_realizable_data_cost_nothing_and_penetrating_data_cost_1_over_eps():
     """Noise-free data at the true height: the violation loss is 0 for every eps (a realizable
-    model keeps its global minimum), up to roundoff. With the ground 1 cm too high, the data that end a step
-    on the true ground penetrate the model's, ``h >= neg(phi)^2 / 2`` whatever lam, so the loss
+    model keeps its global minimum), up to roundoff. With the ground 1 cm too high, the data
+    that end a step on the true ground penetrate the model's, ``h >= neg(phi)^2 / 2`` whatever lam, so the loss
     grows like 1 / eps as eps -> 0: the violation loss does not tend to the prediction loss
     (which stays finite) on data the model cannot explain."""
     rng = np.random.default_rng(3)
