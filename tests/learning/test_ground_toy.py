@@ -87,9 +87,9 @@ def test_naive_implicit_equals_explicit_with_shared_parameters():
 def test_realizable_data_cost_nothing_and_penetrating_data_cost_1_over_eps():
     """Noise-free data at the true height: the violation loss is 0 for every eps (a realizable
     model keeps its global minimum), up to roundoff. With the ground 1 cm too high, the data
-    that end a step on the true ground penetrate the model's, ``h >= neg(phi)^2 / 2`` whatever lam, so the loss
-    grows like 1 / eps as eps -> 0: the violation loss does not tend to the prediction loss
-    (which stays finite) on data the model cannot explain."""
+    that end a step on the true ground penetrate the model's, ``h >= neg(phi)^2 / 2`` whatever
+    lam, so the loss grows like 1 / eps as eps -> 0: the violation loss does not tend to the
+    prediction loss (which stays finite) on data the model cannot explain."""
     rng = np.random.default_rng(3)
     z, v, y = data(rng, 100, noise=0.0)
     for eps in (1e-6, 1e-2, 0.25, 10.0):  # 0 up to the gap's roundoff (1e-16 m) times lam / eps
