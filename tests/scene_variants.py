@@ -42,3 +42,28 @@ def with_friction(scene: Scene, k: int, delta: float) -> Scene:
     contacts = list(scene.contacts)
     contacts[k] = replace(contacts[k], friction=contacts[k].friction + delta)
     return replace(scene, contacts=tuple(contacts))
+
+
+def with_joint_damping(scene: Scene, joint: str, value: float, folder: Path) -> Scene:
+    """The scene with ``joint``'s viscous damping set to ``value`` (N m s / rad or N s / m)
+    through a re-written model file: an MJCF ``<joint name="..." .../>`` gets its ``damping``
+    attribute (replaced where the file gives one), an SDF ``<joint name="...">`` a
+    ``<dynamics><damping>`` element in its ``<axis>``."""
+    spec = scene.models[0]
+    source = resolve_model_file(spec)
+    text = source.read_text()
+    value = float(value)
+    if source.suffix == ".xml":
+        element = re.search(rf'<joint\b[^>]*\bname="{joint}"[^>]*/>', text)
+        old = element.group(0)
+        new = re.sub(r'\sdamping="[^"]*"', "", old)
+        new = new.replace("<joint", f'<joint damping="{value!r}"', 1)
+    else:
+        element = re.search(rf'<joint name="{joint}".*?</joint>', text, flags=re.S)
+        old = element.group(0)
+        assert "<dynamics>" not in old, f"joint {joint!r} already has dynamics in {source}"
+        new = old.replace("<axis>", f"<axis><dynamics><damping>{value!r}</damping></dynamics>", 1)
+    assert new != old, f"joint {joint!r} not found in {source}"
+    path = folder / f"{joint}_damping_{value!r}{source.suffix}"
+    path.write_text(text[: element.start()] + new + text[element.end() :])
+    return replace(scene, models=(replace(spec, file=str(path)),))

@@ -364,8 +364,12 @@ class ParameterDerivatives:
         dW: (B, nv, nv, T) derivative of the inverse mass matrix (e.g. for body masses), or
             None where no parameter moves it.
         dv_free: (B, nv, T) derivative of the free velocity, or None likewise.
-        dJn: (B, nc, nv, T) derivative of the normal rows' Jacobian, or None (the Anitescu
-            generators ``n + alpha t`` move with the friction coefficients).
+        dJn: (B, nc, nv, T) derivative of the normal rows' Jacobian (e.g. a contact point's
+            offset moves it), or None where no parameter moves it.
+        dJt: (B, nt, nv, T) derivative of the tangent rows' Jacobian (e.g. a contact sphere's
+            radius moves its witness point, and with it the rolling part of the tangential
+            velocity), or None likewise. Under Anitescu both move the generator rows
+            ``n + alpha t`` (as do the friction coefficients themselves).
         smoothing_from: the first of the trailing columns that are the smoothing policy's
             numeric parameters (:meth:`SmoothingPolicy.dmu_dparameters`: they move mu at fixed
             distances, and nothing else), or None when there are none. Their entries in the
@@ -377,6 +381,7 @@ class ParameterDerivatives:
     dW: np.ndarray | None = None
     dv_free: np.ndarray | None = None
     dJn: np.ndarray | None = None
+    dJt: np.ndarray | None = None
     smoothing_from: int | None = None
 
 
@@ -587,6 +592,7 @@ def _anitescu_step(quant, cone, h, smoothing, gradient, strict, par, options):
         return Jn[:, g.contact] + a * Jt[:, tangent] * fr.reshape(a.shape)
 
     B, nv = quant.v.shape
+    nc, nt, _ = cone.sizes()
     derivs = {}
     if quant.has_derivatives:
         derivs = dict(
@@ -614,13 +620,19 @@ def _anitescu_step(quant, cone, h, smoothing, gradient, strict, par, options):
     if par is not None:
         T = par.dphi.shape[-1]
         _check_parameter_shapes(par, cone, B)
-        # d D_j / d theta = t_j d alpha / d theta: the generators move with the coefficients
+        # d D_j / d theta = t_j d alpha / d theta: the generators move with the coefficients,
+        # and with the rows themselves, d n_c + alpha d t_j (e.g. a contact's radius or offset)
         dalpha = np.zeros((ng, T))
         dalpha[fr] = par.dfriction[g.friction[fr]]
         dJn = quant.Jt[:, tangent, :, None] * (dalpha * fr[:, None])[None, :, None, :]
+        if par.dJn is not None or par.dJt is not None:
+            dJn_c = np.zeros((B, nc) + dJn.shape[2:]) if par.dJn is None else par.dJn
+            dJt_c = np.zeros((B, nt) + dJn.shape[2:]) if par.dJt is None else par.dJt
+            dJn = dJn + rows(dJn_c, dJt_c)
         par_g = ParameterDerivatives(
-            par.dphi[:, g.contact], np.zeros((0, T)), par.dW, par.dv_free, dJn, par.smoothing_from
-        )
+            par.dphi[:, g.contact], np.zeros((0, T)), par.dW, par.dv_free, dJn=dJn,
+            smoothing_from=par.smoothing_from,
+        )  # fmt: skip
     r = _lcp_step(
         quant_g, cone_g, h, _GeneratorSmoothing(smoothing, g), gradient, strict, par_g, options,
         regularize_normal=True,
@@ -634,7 +646,6 @@ def _anitescu_step(quant, cone, h, smoothing, gradient, strict, par, options):
     dlam_dtheta = None
     if r.dlam_dtheta is not None:
         dlam_dtheta = L @ r.dlam_dtheta
-        nc = cone.sizes()[0]
         # beta_j = alpha lam_g[j]: its coefficient's derivative times the generator impulse
         dlam_dtheta[:, nc + g.tangent[fr]] += lam_g[:, fr, None] * dalpha[fr][None]
     return ContactStepResult(
@@ -773,9 +784,11 @@ def _parameter_blocks(quant, cone, h, S, G, lam, f, v_next, par):
     ``dzn`` (B, nc, T), the normal distances' derivative (for mu in the total mode).
 
     theta moves the normal rows' offsets (``dphi``), the cone rows' matrix entries
-    (``F[cone f, gamma f] = alpha_f``, so ``(dF lam)_f = dalpha_f gamma_f``) and, through W and
-    v_free (masses), the velocity rows: ``inner = dv_free + dW f`` with ``f = G^T lam``, entering
-    as ``S G inner``. G and N do not depend on these parameters."""
+    (``F[cone f, gamma f] = alpha_f``, so ``(dF lam)_f = dalpha_f gamma_f``), through W and
+    v_free (masses, joint damping) the velocity rows, and through G (a contact's radius or
+    offset) the rows themselves: ``inner = dv_free + dW f + W dG^T lam`` with ``f = G^T lam``,
+    entering as ``S (G inner + dG v+)`` (S: h on normal rows, 1 on tangent rows). N does not
+    depend on these parameters."""
     nc, nt, nf = cone.sizes()
     B, d = lam.shape
     T = par.dphi.shape[-1]
@@ -788,15 +801,19 @@ def _parameter_blocks(quant, cone, h, S, G, lam, f, v_next, par):
         inner += np.einsum("bnmt,bm->bnt", par.dW, f)
     if par.dJn is not None:  # W dJn^T gamma
         inner += quant.W @ np.einsum("bint,bi->bnt", par.dJn, lam[:, :nc])
+    if par.dJt is not None:  # W dJt^T beta
+        inner += quant.W @ np.einsum("bint,bi->bnt", par.dJt, lam[:, nc:r])
     dz = np.zeros((B, d, T))
     dz[:, :nc] = par.dphi
     dz[:, :r] += S[None, :, None] * np.einsum("bin,bnt->bit", G, inner)
+    if par.dJt is not None:  # the tangent rows move: S_t dJt v+ (z_t = Jt v_free holds no phi)
+        dz[:, nc:r] += S[None, nc:r, None] * np.einsum("bint,bn->bit", par.dJt, v_next)
     dz[:, r:] = lam[:, cone.frictional, None] * par.dfriction[None]
     dzn = par.dphi.copy()
     if par.dv_free is not None:
         dzn += h * np.einsum("bin,bnt->bit", quant.Jn, par.dv_free)
     if par.dJn is not None:  # the rows themselves move: h dJn v+ (and h dJn v_free for mu)
-        dz[:, :nc] += h * np.einsum("bint,bn->bit", par.dJn, v_next)
+        dz[:, :nc] += S[None, :nc, None] * np.einsum("bint,bn->bit", par.dJn, v_next)
         dzn += h * np.einsum("bint,bn->bit", par.dJn, quant.v_free)
     return inner, dz, dzn
 
@@ -809,6 +826,13 @@ def _check_parameter_shapes(par: ParameterDerivatives, cone: FrictionCone, B: in
             f"parameter derivatives must be dphi (B, nc, T) = ({B}, {nc}, T) and dfriction "
             f"(nf, T) = ({nf}, T); got {par.dphi.shape} and {par.dfriction.shape}"
         )
+    for name, rows in (("dJn", nc), ("dJt", nt)):
+        d = getattr(par, name)
+        if d is not None and (d.ndim != 4 or d.shape[:2] != (B, rows) or d.shape[-1] != T):
+            raise ValueError(
+                f"parameter derivative {name} must have shape (B, {rows}, nv, T) = "
+                f"({B}, {rows}, nv, {T}); got {d.shape}"
+            )
 
 
 @nb.njit(cache=True)

@@ -214,6 +214,76 @@ class ContactModelBase(ABC):
             dv_free[b] = self.h * (np.einsum("ijt,j->it", dW[b], tau) + W @ dtau)
         return dW, dv_free
 
+    @functools.cached_property
+    def point_contacts(self) -> np.ndarray:
+        """Indices of the candidates that are points (or spheres) against the ground
+        (:class:`PointContact`), whose radius and offset ``p_BC`` are model parameters (see
+        :meth:`point_parameter_derivatives`)."""
+        return np.array(
+            [i for i, c in enumerate(self.contacts) if isinstance(c, PointContact)], dtype=np.int64
+        )
+
+    @functools.cached_property
+    def _geometry_context(self):
+        """A double context of the plant of its own (for :meth:`point_parameter_derivatives`)."""
+        return self.plant.CreateDefaultContext()
+
+    def point_parameter_derivatives(
+        self, q: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Derivatives of the rows of the candidates ``active`` (na indices) at the positions q
+        (B, nq) with respect to each point candidate's own geometry, four columns per candidate:
+        its radius r (m), then its offset ``p_BC = (x, y, z)`` (m, body frame).
+
+        With the body's orientation R and world-frame angular-velocity Jacobian Jw (3, nv; in
+        this plant's v, whatever the provider), the distance ``phi = n . (p_WB + R p_BC) - r -
+        height`` and the witness point ``Q = C - r n`` (on the body) give
+
+            dphi/dr = -1,                 d J_Q / dr = [n]x Jw            (so dJn/dr = 0),
+            dphi/dp_a = n . R e_a,        d J_Q / dp_a = -[R e_a]x Jw,
+
+        all constant in (r, p_BC): the rows are affine in a candidate's geometry. Returns
+        ``dphi`` (B, na, 4) (m/m), ``dJn`` (B, na, nv, 4) and ``dJt`` (B, nt, nv, 4) (the rows'
+        units per m), in the row layout of :meth:`quantities` (k tangent rows per frictional
+        candidate, in ``active`` order); each row depends on its own candidate only. Pair
+        candidates' rows are 0."""
+        q = np.asarray(q, dtype=float)
+        active = np.asarray(active, dtype=np.int64)
+        B, na, nv = len(q), active.size, self.nv
+        k = self.cone.directions
+        frictional = ~np.isnan(self.cone.coefficients[active])
+        nt = int(frictional.sum()) * k
+        dphi = np.zeros((B, na, 4))
+        dJn = np.zeros((B, na, nv, 4))
+        dJt = np.zeros((B, nt, nv, 4))
+        plant, ctx, world = self.plant, self._geometry_context, self.plant.world_frame()
+        n = self.normal
+        points = [
+            (i, local)
+            for local, i in enumerate(active)
+            if isinstance(self.contacts[i], PointContact)
+        ]
+        first_row = np.concatenate([[0], np.cumsum(frictional * k)])  # each one's first Jt row
+        for b in range(B):
+            plant.SetPositions(ctx, q[b])
+            for i, local in points:
+                body = self._bodies_d[i]
+                R = plant.EvalBodyPoseInWorld(ctx, body).rotation().matrix()
+                Jw = plant.CalcJacobianAngularVelocity(
+                    ctx, JacobianWrtVariable.kV, body.body_frame(), world, world
+                )
+                dJ = np.empty((3, nv, 4))  # d J_Q / d(r, x, y, z), J_Q (3, nv)
+                dJ[..., 0] = np.cross(n, Jw, axis=0)
+                for a in range(3):
+                    dJ[..., a + 1] = -np.cross(R[:, a], Jw, axis=0)
+                dphi[b, local, 0] = -1.0
+                dphi[b, local, 1:] = n @ R
+                dJn[b, local] = np.einsum("i,inc->nc", n, dJ)
+                if frictional[local]:
+                    start = first_row[local]
+                    dJt[b, start : start + k] = np.einsum("ti,inc->tnc", self.tangents, dJ)
+        return dphi, dJn, dJt
+
     def cone_for(self, active: np.ndarray) -> FrictionCone:
         """The friction cone of a subset of the contacts (indices)."""
         active = np.asarray(active, dtype=np.int64)

@@ -11,6 +11,7 @@ applies every setting the scene names.
 from __future__ import annotations
 
 import copy
+import functools
 import warnings
 from dataclasses import replace
 
@@ -125,14 +126,53 @@ class ComplementarityStepper:
     @property
     def parameter_names(self) -> tuple[str, ...]:
         """The model parameters ``step(..., parameters=True)`` differentiates with respect to,
-        in column order: ``"ground_height"`` (m), ``"friction[i]"`` for every frictional contact
-        candidate i (its Coulomb coefficient), then ``"mass[body]"`` (kg) for every body with a
-        mass (its centre of mass and unit inertia held)."""
-        coeff = self.model.cone.coefficients
+        in column order (docs/math.md section 6d):
+
+        - ``"ground_height"`` (m);
+        - ``"friction[i]"`` for every frictional contact candidate i (its Coulomb coefficient);
+        - ``"mass[body]"`` (kg) for every body with a mass (its centre of mass and unit inertia
+          held);
+        - ``"radius[i]"`` (m) for every point candidate i against the ground (radius 0
+          included): the sphere's radius, which moves the distance and the witness point;
+        - ``"damping[joint]"`` (N m s / rad or N s / m) for every one-velocity joint (revolute,
+          prismatic; ``"instance::joint"`` where a name occurs in several model instances),
+          when this stepper applies joint damping (``damping=True``), also where it is 0;
+        - ``"offset[i].x"``, ``".y"``, ``".z"`` (m) for every point candidate i: its point
+          ``p_BC`` in its body's frame.
+        """
+        m = self.model
+        coeff = m.cone.coefficients
+        points = m.point_contacts
         return (
             ("ground_height",)
             + tuple(f"friction[{i}]" for i in np.flatnonzero(~np.isnan(coeff)))
-            + tuple(f"mass[{name}]" for name in self.model.massive_bodies)
+            + tuple(f"mass[{name}]" for name in m.massive_bodies)
+            + tuple(f"radius[{i}]" for i in points)
+            + tuple(f"damping[{name}]" for name, _ in self._damping_joints)
+            + tuple(f"offset[{i}].{axis}" for i in points for axis in "xyz")
+        )
+
+    @functools.cached_property
+    def _damping_joints(self) -> tuple[tuple[str, int], ...]:
+        """``(name, velocity index)`` of every one-velocity joint, the joint-damping parameters
+        (none when this stepper does not apply damping). A name that occurs in several model
+        instances is qualified as ``"instance::joint"``."""
+        if not self._flags["damping"]:
+            return ()
+        plant = self.model.plant
+        joints = [plant.get_joint(j) for j in plant.GetJointIndices()]
+        joints = [j for j in joints if j.num_velocities() == 1]
+        counts: dict[str, int] = {}
+        for j in joints:
+            counts[j.name()] = counts.get(j.name(), 0) + 1
+        return tuple(
+            (
+                j.name()
+                if counts[j.name()] == 1
+                else f"{plant.GetModelInstanceName(j.model_instance())}::{j.name()}",
+                int(j.velocity_start()),
+            )
+            for j in joints
         )
 
     def with_smoothing(self, smoothing: SmoothingPolicy) -> ComplementarityStepper:
@@ -145,12 +185,19 @@ class ComplementarityStepper:
 
     def parameter_values(self) -> np.ndarray:
         """The values of :attr:`parameter_names` in this stepper's model (T,): the ground
-        height (m), the friction coefficients, the masses (kg)."""
+        height (m), the friction coefficients, the masses (kg), the point candidates' radii (m),
+        the joint damping (N m s / rad or N s / m), the point candidates' offsets (m)."""
         m = self.model
         coeff = m.cone.coefficients
         ctx = m.plant.CreateDefaultContext()
         masses = [m.plant.get_body(index).get_mass(ctx) for _, index in m._massive]
-        return np.concatenate([[m.ground.height], coeff[~np.isnan(coeff)], masses]).astype(float)
+        points = [m.contacts[i] for i in m.point_contacts]
+        return np.concatenate([
+            [m.ground.height], coeff[~np.isnan(coeff)], masses,
+            [c.radius for c in points],
+            [self.damping[v] for _, v in self._damping_joints],
+            np.reshape([c.p_BC for c in points], -1),
+        ]).astype(float)  # fmt: skip
 
     @property
     def smoothing_parameter_names(self) -> tuple[str, ...]:
@@ -162,9 +209,13 @@ class ComplementarityStepper:
         """The theta block of one group's quantities (states q, v, u) for the columns
         ``names``: every contact's distance falls by the ground height's increase; each
         frictional contact's coefficient is its own column; the masses move W and the free
-        velocity; the smoothing parameters (trailing columns) move mu only."""
+        velocity; a point candidate's radius and offset move its distance and its rows
+        (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.point_parameter_derivatives`);
+        the smoothing parameters (trailing columns) move mu only. The joint-damping columns are
+        filled in later, on the damped step (:meth:`_joint_rows`)."""
         column = {name: j for j, name in enumerate(names)}
         B, T = q.shape[0], len(names)
+        nv = self.sizes[1]
         dphi = np.zeros((B, idx.size, T))
         if "ground_height" in column:
             dphi[:, :, column["ground_height"]] = -1.0
@@ -174,14 +225,41 @@ class ComplementarityStepper:
             if j is not None:
                 dfriction[f, j] = 1.0
         masses = [column[f"mass[{n}]"] for n in self.model.massive_bodies if f"mass[{n}]" in column]
-        dW = np.zeros((B,) + (self.sizes[1],) * 2 + (T,))
-        dv_free = np.zeros((B, self.sizes[1], T))
+        dW = np.zeros((B, nv, nv, T))
+        dv_free = np.zeros((B, nv, T))
         if masses:
             dW[..., masses], dv_free[..., masses] = self.model.mass_derivatives(q, v, u)
+        # each candidate's geometry columns: radius, offset x, y, z (-1: not a column)
+        geometry = np.array(
+            [
+                [
+                    column.get(key, -1)
+                    for key in (f"radius[{i}]", *(f"offset[{i}].{a}" for a in "xyz"))
+                ]
+                for i in idx
+            ],
+            dtype=np.int64,
+        ).reshape(idx.size, 4)
+        dJn = dJt = None
+        if (geometry >= 0).any():
+            g_phi, g_Jn, g_Jt = self.model.point_parameter_derivatives(q, idx)
+            dJn = np.zeros((B, idx.size, nv, T))
+            dJt = np.zeros((B, cone.sizes()[1], nv, T))
+            k = cone.directions
+            for local, c in zip(*np.nonzero(geometry >= 0), strict=True):
+                j = geometry[local, c]
+                dphi[:, local, j] += g_phi[:, local, c]
+                dJn[:, local, :, j] = g_Jn[:, local, :, c]
+            for f, local in enumerate(cone.frictional):  # its k tangent rows
+                for c in np.flatnonzero(geometry[local] >= 0):
+                    dJt[:, f * k : (f + 1) * k, :, geometry[local, c]] = g_Jt[
+                        :, f * k : (f + 1) * k, :, c
+                    ]
         smoothing = [j for name, j in column.items() if name.startswith("smoothing.")]
         return ParameterDerivatives(
-            dphi, dfriction, dW, dv_free, smoothing_from=min(smoothing) if smoothing else None
-        )
+            dphi, dfriction, dW, dv_free, dJn=dJn, dJt=dJt,
+            smoothing_from=min(smoothing) if smoothing else None,
+        )  # fmt: skip
 
     def step(
         self,
@@ -288,11 +366,12 @@ class ComplementarityStepper:
             )
         return cache[key]
 
-    def _joint_rows(self, quant, par, q, lidx: np.ndarray, jacobians: bool):
+    def _joint_rows(self, quant, par, q, lidx: np.ndarray, jacobians: bool, names=()):
         """One group's quantities with the joint-limit rows ``lidx`` appended to the contact
-        rows (frictionless; their distances do not depend on the model parameters), and the
-        model-parameter derivatives carried to the damped step (the provider took the joint
-        damping: ``quantities(..., damping=...)``)."""
+        rows (frictionless; their distances and rows do not depend on the model parameters),
+        and the model-parameter derivatives (columns ``names``) carried to the damped step (the
+        provider took the joint damping: ``quantities(..., damping=...)``), with the damping's
+        own columns (:meth:`_damping_columns`)."""
         if lidx.size:
             P = quant.dphi.shape[-1] if jacobians else None
             phi, J, dphi, dJ = self.limits.rows(q, lidx, self.sizes[1], P)
@@ -308,10 +387,36 @@ class ComplementarityStepper:
             quant = replace(quant, **extra)
             if par is not None:
                 zeros = np.zeros((q.shape[0], lidx.size, par.dphi.shape[-1]))
-                par = replace(par, dphi=np.concatenate([par.dphi, zeros], axis=1))
-        if not self._damps or par is None:  # the provider took the damping (quantities)
+                padded = dict(dphi=np.concatenate([par.dphi, zeros], axis=1))
+                if par.dJn is not None:
+                    rows = np.zeros((q.shape[0], lidx.size) + par.dJn.shape[2:])
+                    padded["dJn"] = np.concatenate([par.dJn, rows], axis=1)
+                par = replace(par, **padded)
+        if par is None:
             return quant, par
-        return quant, damped_parameters(par, quant.W, quant.v_free, self.damping, self.model.h)
+        if self._damps:  # the provider took the damping (quantities): carry theta's to it
+            par = damped_parameters(par, quant.W, quant.v_free, self.damping, self.model.h)
+        return quant, self._damping_columns(par, quant, names)
+
+    def _damping_columns(self, par: ParameterDerivatives, quant, names) -> ParameterDerivatives:
+        """``par`` with the joint-damping columns of ``names`` filled in, on the damped step's
+        ``W' = (M + h D)^-1`` and ``v_free' = W' M v_free`` (``quant``; with all damping 0 the
+        undamped ones, W' = W): for joint velocity j, ``dW'/dD_j = -h W' e_j e_j^T W'`` and
+        ``dv_free'/dD_j = -h W' e_j v_free'_j`` (docs/math.md section 6d)."""
+        column = {name: j for j, name in enumerate(names)}
+        cols = [
+            (column[f"damping[{name}]"], v)
+            for name, v in self._damping_joints
+            if f"damping[{name}]" in column
+        ]
+        if not cols:
+            return par
+        h, W, v_free = self.model.h, quant.W, quant.v_free
+        dW, dv_free = par.dW.copy(), par.dv_free.copy()
+        for j, v in cols:
+            dW[..., j] = -h * W[:, :, v, None] * W[:, None, v, :]
+            dv_free[..., j] = -h * W[:, :, v] * v_free[:, v, None]
+        return replace(par, dW=dW, dv_free=dv_free)
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: tuple) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
@@ -352,7 +457,7 @@ class ComplementarityStepper:
             par = None
             if parameters:
                 par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows], parameters)
-            quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians)
+            quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians, parameters)
             r = contact_step(
                 quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
                 parameters=par, **self.solver_options,

@@ -68,11 +68,13 @@ def test_parameter_jacobians_match_central_differences(name, friction, smoothing
     nc = len(model.contact_model.contacts)
     assert names[1 : 1 + nc] == tuple(f"friction[{i}]" for i in range(nc))  # all frictional
     bodies = model.contact_model.massive_bodies  # the floating base's chain is massless
-    assert names[1 + nc :] == tuple(f"mass[{b}]" for b in bodies)
+    assert names[1 + nc : 1 + nc + len(bodies)] == tuple(f"mass[{b}]" for b in bodies)
+    # after them: radii, joint damping, offsets (tests/multibody/test_model_parameters_extended.py)
+    assert names[1 + nc + len(bodies)].startswith("radius[")
     nx = x.size
     assert r.dx_dtheta.shape == (1, nx, len(names)) and r.dx_du.shape == (1, nx, u.size)
     assert r.dimpulse_dtheta.shape == (1, nc, len(names))
-    scale = 1.0 + np.abs(r.dx_dtheta).max()
+    scale = 1.0 + np.abs(r.dx_dtheta[0, :, : 1 + nc + len(bodies)]).max()  # the columns here
     # ground height
     fd = (
         _next_state(replace(scene, ground_height=scene.ground_height + EPS), smoothing, x, u)
@@ -130,7 +132,10 @@ def test_parameter_jacobians_match_independent_identities(name, iz, smoothing):
     if name == "box_push":
         m = model.plant.GetBodyByName("box").default_mass()
         np.testing.assert_allclose(
-            r.dx_dtheta[0][:, -1], -(r.dx_du[0] @ u) / m, rtol=1e-8, atol=1e-12
+            r.dx_dtheta[0][:, r.theta_names.index("mass[box]")],
+            -(r.dx_du[0] @ u) / m,
+            rtol=1e-8,
+            atol=1e-12,
         )
 
 
