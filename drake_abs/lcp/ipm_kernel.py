@@ -177,9 +177,10 @@ def _neighbourhood_ok(L, S, dl, ds, a, drive, target, strict):
             total += (L[i] + a * dl[i]) * (S[i] + a * ds[i])
     mean = total / max(n, 1)
     for i in range(d):
+        new = (L[i] + a * dl[i]) * (S[i] + a * ds[i])
         if drive[i]:
             floor = GAMMA * mean if strict else min(GAMMA * mean, TARGET_FLOOR * target[i])
-            if (L[i] + a * dl[i]) * (S[i] + a * ds[i]) < floor:
+            if new < floor:
                 return False
     return True
 
@@ -346,11 +347,15 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
             use_corr = stalls < STALLS_BEFORE_NO_CORRECTOR and not no_corr
             if not use_corr:
                 no_corr = True
-            # (6) corrector: centre on max(sigma mu, mu_i), never below the requested target; a
-            # contact already at its target (not driving) is held there exactly (step 3), since
-            # sigma mu_cur, the mean of the others, can lie above it when targets differ
+            # (6) corrector: centre on max(sigma mu, mu_i), never below the requested target. A
+            # contact already at a target that the tolerance resolves (a smoothed contact; not
+            # driving) is held there exactly (step 3): sigma mu_cur, the mean of the others, can
+            # lie above it when targets differ, and raising it made the iterations cycle. A
+            # contact at a target below the absolute tolerance (an exact contact at the floor)
+            # keeps centring with the others, which keeps it off the boundary.
             for i in range(d):
-                t = max(sigma * mu_cur, ma[i]) if drive[i] else ma[i]
+                held = not drive[i] and ma[i] > tol * ga[i]
+                t = ma[i] if held else max(sigma * mu_cur, ma[i])
                 target[i] = t
                 corr = dl_aff[i] * ds_aff[i] if (t > ma[i] and use_corr) else 0.0
                 rhs[i] = (L[i] * rp[i] - (gap[i] - t + corr)) * w[i]

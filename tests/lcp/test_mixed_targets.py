@@ -47,3 +47,18 @@ def test_mixed_targets_converge_over_a_range_of_scales(monkeypatch):
     for scale in (0.5, 0.99, 1.0, 1.1, 1.5, 3.0):
         r = solve_lcp(F, q, mu * scale, on_bad_matrix="attempt", strict=True)
         np.testing.assert_allclose(r.lam, central_point(F, q, mu * scale), rtol=1e-8)
+
+
+def test_exact_contacts_at_the_floor_keep_centring_beside_smoothed_ones(monkeypatch):
+    """A monotone (Anitescu) step of solo12 under the Gaussian-matched design: per-contact mu
+    from 1e-28 (exact: the floor target) to 2e-6. Contacts at the floor are not held there but
+    centre with the others (holding them let their products collapse to 1e-80 and the solve
+    stall); the smoothed contacts are held at their targets. From the default start alone."""
+    data = np.load(Path(__file__).with_name("solo12_anitescu_floor_lcp.npz"))
+    F, q, mu = data["F"], data["z"], data["mu"]
+    assert mu.min() < 1e-25 and mu.max() > 1e-6
+    monkeypatch.setattr(ipm, "SECOND_START", False)
+    r = solve_lcp(F, q, mu, on_bad_matrix="trusted", strict=True)
+    assert r.iterations < 40
+    smoothed = mu > 1e-10
+    np.testing.assert_allclose((r.lam * r.slack)[smoothed], mu[smoothed], rtol=1e-10)
