@@ -44,6 +44,8 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "scene-recordings": "scene_recordings",
     "locomotion-transfer": "locomotion_transfer",
     "implicit-learning": "implicit_learning",
+    "model-learning": "model_learning",
+    "model-based-fopg": "model_based_fopg",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 
@@ -68,6 +70,10 @@ DESCRIPTIONS: dict[str, str] = {
     "HalfCheetah",
     "implicit-learning": "learning a ground height: explicit, naive and violation implicit losses "
     "(Bianchini et al. 2022, Table 1, Figs. 1 and 3)",
+    "model-learning": "our model's parameters learned from SAP and MuJoCo data, against a neural "
+    "network: prediction error vs horizon and data size",
+    "model-based-fopg": "Algorithm 2 in closed loop: model learned from MuJoCo's Hopper, FOPG-ABS "
+    "in it, evaluated in MuJoCo",
 }
 
 

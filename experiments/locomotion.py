@@ -136,9 +136,10 @@ def evaluate(task, theta, x0s: np.ndarray, horizon: int, policy=None) -> float:
 
 
 def train_method(task, method: str, config: Config, seed: int, x_eval: np.ndarray,
-                 true_task=None) -> dict:  # fmt: skip
+                 true_task=None, theta0: np.ndarray | None = None) -> dict:  # fmt: skip
     """One training run on ``task`` (the method's model): per-iteration samples, seconds and the
-    return evaluated on ``true_task`` (default: ``task``); the final theta."""
+    return evaluated on ``true_task`` (default: ``task``); the final theta. A gradient method
+    starts from ``theta0`` (default zeros)."""
     true_task = task if true_task is None else true_task
     if method == "ars":
         return _train_ars(task, config, seed, x_eval, true_task)
@@ -146,7 +147,9 @@ def train_method(task, method: str, config: Config, seed: int, x_eval: np.ndarra
         return _train_mbpo(task, config, seed, x_eval, true_task)
     inner = LinearPolicy(task.n_obs, task.nu)
     obj = task.objective(inner, config.horizon, config.sigma)
-    theta = np.zeros(obj.policy.n_params)
+    theta = np.zeros(obj.policy.n_params) if theta0 is None else np.array(theta0, dtype=float)
+    if theta.shape != (obj.policy.n_params,):
+        raise ValueError(f"theta0 must have shape ({obj.policy.n_params},); got {theta.shape}")
     estimator = _estimator(method, config)
     optimizer = Adam(lr=config.learning_rate)
     rng = np.random.default_rng(seed)

@@ -67,3 +67,54 @@ def with_joint_damping(scene: Scene, joint: str, value: float, folder: Path) -> 
     path = folder / f"{joint}_damping_{value!r}{source.suffix}"
     path.write_text(text[: element.start()] + new + text[element.end() :])
     return replace(scene, models=(replace(spec, file=str(path)),))
+
+
+def with_inertia(
+    scene: Scene, body: str, mass: float, unit_inertia, folder: Path, com=None
+) -> Scene:
+    """The scene with ``body``'s mass (kg) and unit rotational inertia about its centre of mass
+    (m^2; the entries xx, yy, zz, xy, xz, yz of the matrix, in the body frame) set, its centre
+    of mass kept, through a re-written model file: an SDF link's ``<mass>`` and ``<inertia>``
+    elements or a URDF link's ``mass`` and ``inertia`` attributes (its inertial frame must not
+    be rotated); an MJCF body gets an ``<inertial>`` element at ``com`` (m, body frame: the
+    file's geoms give it, so the caller does) and the compiler ``inertiafromgeom="auto"``, so
+    that the other bodies keep the inertia of their geoms."""
+    spec = scene.models[0]
+    source = resolve_model_file(spec)
+    text = source.read_text()
+    mass = float(mass)
+    inertia = dict(zip(("ixx", "iyy", "izz", "ixy", "ixz", "iyz"),
+                       (mass * float(g) for g in unit_inertia), strict=True))  # fmt: skip
+    if source.suffix == ".xml":
+        assert com is not None, "an MJCF body's centre of mass comes from its geoms: pass com"
+        body_tag = re.search(rf'<body\b[^>]*\bname="{body}"[^>]*>', text)
+        assert body_tag is not None, f"no body {body!r} in {source}"
+        assert "<inertial" not in text, f"{source} already has <inertial> elements"
+        element = (
+            f'<inertial pos="{" ".join(repr(float(x)) for x in com)}" mass="{mass!r}" '
+            f'fullinertia="{" ".join(repr(x) for x in inertia.values())}"/>'
+        )
+        new = text[: body_tag.end()] + element + text[body_tag.end() :]
+        compiler = re.sub(r'inertiafromgeom="[^"]*"', 'inertiafromgeom="auto"', new)
+        assert compiler != new or "inertiafromgeom" not in new
+        new = compiler
+    else:
+        link = re.search(rf'<link name="{body}">.*?</inertial>', text, flags=re.S)
+        assert link is not None, f"no inertial for {body!r} in {source}"
+        old = link.group(0)
+        rotated = re.search(r'rpy="([^"]+)"', old) or re.search(r"<pose>([^<]+)</pose>", old)
+        if rotated is not None:
+            angles = [float(a) for a in rotated.group(1).split()][-3:]
+            assert not any(angles), f"{body!r}: a rotated inertial frame in {source}"
+        if source.suffix == ".urdf":
+            scaled = re.sub(r'(<mass\s+value=)"[^"]+"', rf'\1"{mass!r}"', old)
+            for key, value in inertia.items():
+                scaled = re.sub(rf'\b{key}="[^"]+"', f'{key}="{value!r}"', scaled)
+        else:
+            scaled = re.sub(r"<mass>[^<]+</mass>", f"<mass>{mass!r}</mass>", old)
+            for key, value in inertia.items():
+                scaled = re.sub(rf"<{key}>[^<]+</{key}>", f"<{key}>{value!r}</{key}>", scaled)
+        new = text[: link.start()] + scaled + text[link.end() :]
+    path = folder / f"{body}_inertia_{abs(hash((mass, *inertia.values()))):x}{source.suffix}"
+    path.write_text(new)
+    return replace(scene, models=(replace(spec, file=str(path)),))

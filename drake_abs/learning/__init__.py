@@ -5,10 +5,28 @@
 - :mod:`~drake_abs.learning.ground_toy`: the 1-D point mass whose ground height is learned, with
   its explicit, naive-implicit and violation-implicit losses;
 - :mod:`~drake_abs.learning.generalization`: the losses' Lipschitz constants and the
-  generalisation bound of Bianchini et al.'s Theorem 1.
+  generalisation bound of Bianchini et al.'s Theorem 1;
+- :mod:`~drake_abs.learning.scene_losses`: the explicit (eq. 6.1 of Zhang et al.), naive-implicit
+  and violation-implicit losses on any multibody scene, with their gradients in the model
+  parameters;
+- :mod:`~drake_abs.learning.fitting`: random search and L-BFGS-B fits of the parameters;
+- :mod:`~drake_abs.learning.transitions`: recorded transitions, split by episode.
 """
 
+from drake_abs.learning.fitting import FitResult, fit_gradient, fit_random_search
 from drake_abs.learning.ground_toy import GroundToy
+from drake_abs.learning.scene_losses import (
+    LossValue,
+    ModelLoss,
+    explicit_loss,
+    naive_implicit_loss,
+    violation_implicit_loss,
+)
+from drake_abs.learning.transitions import Transitions
 from drake_abs.learning.violation import ViolationLoss, complementarity_violation, violation_loss
 
-__all__ = ["GroundToy", "ViolationLoss", "complementarity_violation", "violation_loss"]
+__all__ = [
+    "FitResult", "GroundToy", "LossValue", "ModelLoss", "Transitions", "ViolationLoss",
+    "complementarity_violation", "explicit_loss", "fit_gradient", "fit_random_search",
+    "naive_implicit_loss", "violation_implicit_loss", "violation_loss",
+]  # fmt: skip

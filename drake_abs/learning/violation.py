@@ -146,10 +146,22 @@ def violation_loss(
             break
         if nl > 1:  # the sign pattern is usually right long before the values: solve on it
             for b in np.flatnonzero(~converged):
-                polished = _solve_on_pattern(D[b], r0[b], lam[b], p[b], w)
-                if polished is not None:
-                    lam[b] = polished
-                    r[b] = r0[b] - D[b] @ polished
+                # on the sign pattern with the negligible impulses dropped (coordinate descent
+                # leaves a zero impulse at a tiny value, whose sign is noise), else as it is
+                cleaned = np.where(np.abs(lam[b]) > 1e-9 * np.abs(lam[b]).max(), lam[b], 0.0)
+                for pattern in (cleaned, lam[b]):
+                    polished = _solve_on_pattern(D[b], r0[b], pattern, p[b], w)
+                    if polished is None:
+                        continue
+                    r_b = r0[b] - D[b] @ polished
+                    # kept only where it is optimal (a singular pattern's least-norm point
+                    # need not be, and jumping to it would undo the sweeps)
+                    if (
+                        _optimality(D[b : b + 1], r_b[None], polished[None], p[b : b + 1], w)[0]
+                        <= tol * scale[b]
+                    ):
+                        lam[b], r[b] = polished, r_b
+                        break
             converged = _optimality(D, r, lam, p, w) <= tol * scale
             if converged.all():
                 break
@@ -195,9 +207,11 @@ def _solve_on_pattern(D, r0, lam, p, w) -> np.ndarray | None:
     negative = lam[S] < 0
     K[np.diag_indices(S.size)] += np.where(negative, w, 0.0)
     rhs -= np.where(negative, 0.0, p[S])
-    try:
-        x = np.linalg.solve(K, rhs)
-    except np.linalg.LinAlgError:
+    # K is singular when impulses act along dependent directions (e.g. a friction cone's
+    # generators at a sticking contact): the stationary points are then an affine set, every
+    # one a minimiser with the same prediction; the one nearest the current impulses is taken
+    x = lam[S] + np.linalg.lstsq(K, rhs - K @ lam[S], rcond=None)[0]
+    if not np.allclose(K @ x, rhs, rtol=1e-10, atol=1e-12 * (1.0 + np.abs(rhs).max())):
         return None
     if np.any((x > 0) == negative) or np.any(x == 0):
         return None

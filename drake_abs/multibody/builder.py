@@ -394,13 +394,19 @@ _REBUILT: dict[str, SceneModel] = {}
 
 def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
     """A pickled :class:`ComplementarityStepper` rebuilt from its scene and settings (smoothing,
-    gradient, activation_distance, friction, joint_limits, damping, solver options)."""
+    gradient, activation_distance, friction, joint_limits, damping, solver options, and
+    ``parameters``: the model parameters changed by
+    :meth:`~ComplementarityStepper.with_parameters`, ``{name: value}``)."""
     key = scene.to_yaml()
     model = _REBUILT.get(key)
     if model is None:
         model = _REBUILT.setdefault(key, build_scene_model(scene))
+    settings = dict(settings)
+    parameters = settings.pop("parameters", None)
     stepper = ComplementarityStepper(model.contact_model, **settings)
     stepper.scene = model.scene
+    if parameters:
+        stepper = stepper.with_parameters(parameters)
     return stepper
 
 

@@ -13,12 +13,19 @@ from __future__ import annotations
 
 import functools
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
-from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
+from pydrake.multibody.plant import MultibodyPlant, MultibodyPlant_
+from pydrake.multibody.tree import (
+    BodyIndex,
+    JacobianWrtVariable,
+    SpatialInertia,
+    SpatialInertia_,
+    UnitInertia_,
+)
 
 from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
 from drake_abs.contact.damping import implicit_damping
@@ -65,6 +72,58 @@ def _pose(plant, ctx, body):
     return X.rotation().matrix(), X.translation()
 
 
+#: the entries of a unit inertia in the order of its parameters (``unit_inertia[body].xx`` ...):
+#: the moments, then the products (entries of the symmetric 3 x 3 matrix, Drake's convention)
+INERTIA_ENTRIES = ("xx", "yy", "zz", "xy", "xz", "yz")
+_ENTRY_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def central_unit_inertia(M) -> np.ndarray:
+    """The unit rotational inertia about the centre of mass (m^2, 3 x 3, in the body frame) of a
+    spatial inertia ``M`` about the body origin (Drake's ``SpatialInertia``, double)."""
+    return np.asarray(M.Shift(M.get_com()).get_unit_inertia().CopyToFullMatrix3())
+
+
+def spatial_inertia(mass: float, com, unit_inertia) -> SpatialInertia:
+    """The spatial inertia about the body origin, in the body frame, of a body of ``mass`` (kg)
+    whose centre of mass is at ``com`` (m, body frame) and whose unit rotational inertia about
+    the centre of mass is ``unit_inertia`` (m^2; 3 x 3, or the six entries of
+    :data:`INERTIA_ENTRIES`). Its physical validity is checked (``RuntimeError`` otherwise)."""
+    G = np.asarray(unit_inertia, float)
+    if G.shape == (6,):
+        G = _full_matrix(G)
+    c = np.asarray(com, float).reshape(3)
+    G_Bo = G + (c @ c) * np.eye(3) - np.outer(c, c)  # shifted from the centre of mass to Bo
+    return SpatialInertia(float(mass), c, _unit_inertia(UnitInertia_[float], G_Bo, float))
+
+
+def _full_matrix(entries) -> np.ndarray:
+    """The symmetric 3 x 3 matrix of six entries in :data:`INERTIA_ENTRIES` order (any type)."""
+    G = np.empty((3, 3), dtype=np.asarray(entries).dtype)
+    for value, (i, j) in zip(entries, _ENTRY_INDEX, strict=True):
+        G[i, j] = G[j, i] = value
+    return G
+
+
+def _unit_inertia(kind, G, scalar):
+    """A UnitInertia of type ``kind`` with the entries of the symmetric matrix G (converted to
+    ``scalar`` where they are not of that type already)."""
+    return kind(*(
+        G[i, j] if isinstance(G[i, j], scalar) else scalar(float(G[i, j])) for i, j in _ENTRY_INDEX
+    ))  # fmt: skip
+
+
+def _to_autodiff(M) -> SpatialInertia_[AutoDiffXd]:
+    """A double SpatialInertia as an AutoDiffXd one (no derivatives)."""
+    G = np.asarray(M.get_unit_inertia().CopyToFullMatrix3())
+    return SpatialInertia_[AutoDiffXd](
+        AutoDiffXd(M.get_mass()),
+        np.array([AutoDiffXd(x) for x in np.asarray(M.get_com())]),
+        _unit_inertia(UnitInertia_[AutoDiffXd], G, AutoDiffXd),
+        True,
+    )
+
+
 def _split(arr: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
     """Value (shape of arr) and gradient (shape + (P,)) of an AutoDiffXd array."""
     flat = np.asarray(arr, dtype=object).ravel()
@@ -73,6 +132,43 @@ def _split(arr: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
     if grad.shape[1] != P:  # entries that carry no derivatives (constants)
         grad = np.zeros((flat.size, P))
     return value, grad.reshape(arr.shape + (P,))
+
+
+def apply_spatial_inertias(plant, context, inertias: Mapping[int, SpatialInertia]) -> None:
+    """Set each body's spatial inertia ``{body index: SpatialInertia (double, about the body
+    origin, in the body frame)}`` on ``context`` of ``plant`` (double or AutoDiffXd)."""
+    autodiff = isinstance(plant, MultibodyPlant_[AutoDiffXd])
+    for index, M in inertias.items():
+        body = plant.get_body(BodyIndex(int(index)))
+        body.SetSpatialInertiaInBodyFrame(context, _to_autodiff(M) if autodiff else M)
+
+
+def _checked_inertias(plant, inertias) -> dict[int, SpatialInertia]:
+    """``spatial_inertias`` checked: ``{body index: SpatialInertia}`` of the plant's bodies (not
+    the world), each physically valid."""
+    out: dict[int, SpatialInertia] = {}
+    if inertias is None:
+        return out
+    if not isinstance(inertias, Mapping):
+        raise ValueError(
+            "spatial_inertias must be a mapping {body index: SpatialInertia}; got "
+            f"{type(inertias).__name__}"
+        )
+    world = int(plant.world_body().index())
+    for index, M in inertias.items():
+        i = int(index)
+        if not 0 <= i < plant.num_bodies() or i == world:
+            raise ValueError(
+                f"spatial_inertias: {index!r} is not the index of one of the plant's bodies "
+                f"(1 to {plant.num_bodies() - 1}; 0 is the world)"
+            )
+        if not isinstance(M, SpatialInertia) or not M.IsPhysicallyValid():
+            raise ValueError(
+                f"spatial_inertias[{i}] must be a physically valid SpatialInertia (about the "
+                f"body origin, in the body frame); got {M!r}"
+            )
+        out[i] = M
+    return out
 
 
 class ContactModelBase(ABC):
@@ -87,6 +183,12 @@ class ContactModelBase(ABC):
         ground: the plane contacts act against.
         time_step: h in s.
         directions: tangent directions per frictional contact (linearised cone).
+        spatial_inertias: bodies whose inertia differs from the plant's defaults (a finalized
+            plant's default masses cannot be changed), ``{body index: SpatialInertia}``: each
+            body's spatial inertia about its origin, expressed in its frame (Drake's
+            ``M_BBo_B``, double). They are set (``SetSpatialInertiaInBodyFrame``) on every
+            context the provider evaluates the plant in, and read by
+            :meth:`body_spatial_inertia`; see :meth:`rebuilt`.
     """
 
     def __init__(
@@ -96,12 +198,17 @@ class ContactModelBase(ABC):
         ground: GroundPlane,
         time_step: float,
         directions: int = 4,
+        *,
+        spatial_inertias: Mapping[int, SpatialInertia] | None = None,
     ):
         if not plant.is_finalized():
             raise ValueError("plant must be finalized")
         if not contacts:
             raise ValueError("contacts must list at least one PointContact or PairContact")
         self.plant = plant
+        #: ``{body index (int): SpatialInertia}``: the bodies' inertias that replace the plant's
+        #: defaults (see the constructor)
+        self.spatial_inertias = _checked_inertias(plant, spatial_inertias)
         self.contacts = list(contacts)
         self.ground = ground
         self.h = float(time_step)
@@ -146,6 +253,44 @@ class ContactModelBase(ABC):
     def _setup(self) -> None:
         """Provider-specific set-up, after the shared attributes exist."""
 
+    def rebuilt(
+        self,
+        *,
+        contacts: list[PointContact | PairContact] | None = None,
+        ground: GroundPlane | None = None,
+        spatial_inertias: Mapping[int, SpatialInertia] | None = None,
+    ) -> ContactModelBase:
+        """A provider of the same kind on the same plant (no model file is read again) with
+        other contact candidates, ground or body inertias (``spatial_inertias`` replaces this
+        provider's overrides; None keeps them); the time step and the cone's directions are
+        kept."""
+        if spatial_inertias is None:
+            spatial_inertias = self.spatial_inertias
+        return type(self)(
+            self.plant,
+            self.contacts if contacts is None else contacts,
+            self.ground if ground is None else ground,
+            self.h,
+            self.cone.directions,
+            spatial_inertias=spatial_inertias,
+        )
+
+    def new_context(self, plant=None):
+        """A default context of ``plant`` (this provider's double plant by default, or its
+        AutoDiffXd copy) with :attr:`spatial_inertias` set on it."""
+        plant = self.plant if plant is None else plant
+        ctx = plant.CreateDefaultContext()
+        apply_spatial_inertias(plant, ctx, self.spatial_inertias)
+        return ctx
+
+    def body_spatial_inertia(self, index) -> SpatialInertia:
+        """The spatial inertia about its origin, in its frame, of the body ``index`` in this
+        provider's dynamics (its override, or the plant's default)."""
+        found = self.spatial_inertias.get(int(index))
+        if found is not None:
+            return found
+        return self.plant.get_body(BodyIndex(int(index))).default_spatial_inertia()
+
     @functools.cached_property
     def massive_bodies(self) -> tuple[str, ...]:
         """Names of the plant's bodies with a positive mass (the mass parameters of
@@ -157,13 +302,13 @@ class ContactModelBase(ABC):
     @functools.cached_property
     def _massive(self) -> tuple[tuple[str, BodyIndex], ...]:
         """``(name, body index)`` of each body with a positive mass (see massive_bodies)."""
-        plant, ctx = self.plant, self.plant.CreateDefaultContext()
+        plant = self.plant
         bodies = [
             plant.get_body(BodyIndex(i))
             for i in range(plant.num_bodies())
             if i != int(plant.world_body().index())
         ]
-        bodies = [b for b in bodies if b.get_mass(ctx) > 0.0]
+        bodies = [b for b in bodies if self.body_spatial_inertia(b.index()).get_mass() > 0.0]
         counts: dict[str, int] = {}
         for b in bodies:
             counts[b.name()] = counts.get(b.name(), 0) + 1
@@ -178,27 +323,45 @@ class ContactModelBase(ABC):
         )
 
     @functools.cached_property
-    def _mass_seeded(self):
-        """An AutoDiffXd copy of the plant and a context whose body masses carry one derivative
-        each (the columns of :meth:`mass_derivatives`); built once."""
-        plant = self.plant.ToAutoDiffXd()
-        ctx = plant.CreateDefaultContext()
-        T = len(self.massive_bodies)
+    def _inertia_seeded(self):
+        """An AutoDiffXd copy of the plant and a context whose massive bodies' inertias carry
+        the derivatives of :meth:`inertial_derivatives` (7 per body: its mass, then its unit
+        inertia about the centre of mass, :data:`INERTIA_ENTRIES`); built once."""
+        plant = getattr(self, "plant_ad", None) or self.plant.ToAutoDiffXd()  # (its own context)
+        ctx = self.new_context(plant)
+        nb = len(self._massive)
+        seeds = np.eye(7 * nb)
         for k, (_, index) in enumerate(self._massive):
-            body = plant.get_body(index)
-            body.SetMass(ctx, AutoDiffXd(body.get_mass(ctx).value(), np.eye(T)[k]))
+            M = self.body_spatial_inertia(index)
+            c = np.asarray(M.get_com())
+            mass = AutoDiffXd(M.get_mass(), seeds[k])
+            G_cm = central_unit_inertia(M)
+            G = _full_matrix(np.array([  # about the centre of mass, seeded
+                AutoDiffXd(G_cm[i, j], seeds[nb + 6 * k + e])
+                for e, (i, j) in enumerate(_ENTRY_INDEX)
+            ]))  # fmt: skip
+            G_Bo = G + ((c @ c) * np.eye(3) - np.outer(c, c))  # shifted to Bo (c held)
+            seeded = SpatialInertia_[AutoDiffXd](
+                mass, np.array([AutoDiffXd(x) for x in c]),
+                _unit_inertia(UnitInertia_[AutoDiffXd], G_Bo, AutoDiffXd), True,
+            )  # fmt: skip
+            plant.get_body(index).SetSpatialInertiaInBodyFrame(ctx, seeded)
         return plant, ctx
 
-    def mass_derivatives(
+    def inertial_derivatives(
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(dW, dv_free)``: the derivatives of W = M^-1 (B, nv, nv, T) and of the free velocity
-        (B, nv, T) with respect to the masses of :attr:`massive_bodies` (each body's mass
-        scaled with its centre of mass and unit inertia held, as ``RigidBody.SetMass`` does),
-        at the states q (B, nq), v (B, nv) and inputs u (B, nu). Evaluated through an
-        AutoDiffXd copy of the plant, whatever the provider; contacts do not depend on mass."""
-        plant, ctx = self._mass_seeded
-        T = len(self.massive_bodies)
+        (B, nv, T) with respect to the inertias of :attr:`massive_bodies`, at the states q
+        (B, nq), v (B, nv) and inputs u (B, nu), T = 7 nb columns: first every body's mass (kg;
+        its centre of mass and unit inertia held, as ``RigidBody.SetMass`` does, so its
+        rotational inertia scales with it), then per body the six entries of its unit
+        rotational inertia about its centre of mass in its frame (m^2, :data:`INERTIA_ENTRIES`;
+        a product entry moves both symmetric entries; mass and centre of mass held). Evaluated
+        through an AutoDiffXd copy of the plant, whatever the provider; contacts do not depend
+        on the inertias."""
+        plant, ctx = self._inertia_seeded
+        T = 7 * len(self.massive_bodies)
         B, nv = v.shape
         dW = np.zeros((B, nv, nv, T))
         dv_free = np.zeros((B, nv, T))
@@ -208,11 +371,21 @@ class ContactModelBase(ABC):
             M, dM = _split(plant.CalcMassMatrix(ctx), T)
             tau_ad = plant.CalcGravityGeneralizedForces(ctx) - plant.CalcBiasTerm(ctx)
             tau, dtau = _split(tau_ad, T)
-            tau = tau + self.B_act @ u[b]  # the actuation does not depend on mass
+            tau = tau + self.B_act @ u[b]  # the actuation does not depend on the inertias
             W = np.linalg.inv(M)
             dW[b] = -np.moveaxis(W @ np.moveaxis(dM, -1, 0) @ W, 0, -1)
             dv_free[b] = self.h * (np.einsum("ijt,j->it", dW[b], tau) + W @ dtau)
         return dW, dv_free
+
+    def mass_derivatives(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The mass columns of :meth:`inertial_derivatives` (its first nb): ``dW`` (B, nv, nv,
+        nb) and ``dv_free`` (B, nv, nb), each body's mass scaled with its centre of mass and unit
+        inertia held."""
+        nb = len(self.massive_bodies)
+        dW, dv_free = self.inertial_derivatives(q, v, u)
+        return dW[..., :nb], dv_free[..., :nb]
 
     @functools.cached_property
     def point_contacts(self) -> np.ndarray:
@@ -226,7 +399,7 @@ class ContactModelBase(ABC):
     @functools.cached_property
     def _geometry_context(self):
         """A double context of the plant of its own (for :meth:`point_parameter_derivatives`)."""
-        return self.plant.CreateDefaultContext()
+        return self.new_context()
 
     def point_parameter_derivatives(
         self, q: np.ndarray, active: np.ndarray
@@ -374,13 +547,13 @@ class MultibodyContactModel(ContactModelBase):
     def _setup(self) -> None:
         plant = self.plant
         self.plant_ad = plant.ToAutoDiffXd()
-        self.context_ad = self.plant_ad.CreateDefaultContext()
+        self.context_ad = self.new_context(self.plant_ad)
         self._bodies = [self.plant_ad.get_body(b.index()) for b in self._bodies_d]
         self._pair_bodies_ad = {
             i: tuple(self.plant_ad.get_body(b.index()) for b in pair)
             for i, pair in self._pair_bodies_d.items()
         }
-        self._context = plant.CreateDefaultContext()
+        self._context = self.new_context()
         self._qdot_is_v = bool(plant.IsVelocityEqualToQDot())
         self._unit_v_d = list(np.eye(self.nv))
         self._unit_v = [

@@ -30,6 +30,8 @@ base made of joints (see :func:`drake_abs.multibody.builder.add_floating_base_ch
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numba as nb
 import numpy as np
 import pinocchio as pin
@@ -38,12 +40,17 @@ from pydrake.multibody.tree import (
     PrismaticJoint,
     QuaternionFloatingJoint,
     RevoluteJoint,
+    SpatialInertia,
     WeldJoint,
 )
 
 from drake_abs.contact.contact_lcp import StepQuantities
 from drake_abs.contact.damping import check_damping
-from drake_abs.multibody.drake_dynamics import ContactModelBase, PointContact
+from drake_abs.multibody.drake_dynamics import (
+    ContactModelBase,
+    PointContact,
+    apply_spatial_inertias,
+)
 from drake_abs.multibody.pinocchio_free_joints import FreeJointCoordinates
 
 
@@ -55,10 +62,15 @@ def _se3(X) -> pin.SE3:
 _SUPPORTED = RevoluteJoint | PrismaticJoint | WeldJoint | QuaternionFloatingJoint
 
 
-def pinocchio_model_from_plant(plant: MultibodyPlant) -> tuple[pin.Model, dict]:
+def pinocchio_model_from_plant(
+    plant: MultibodyPlant, spatial_inertias: Mapping[int, SpatialInertia] | None = None
+) -> tuple[pin.Model, dict]:
     """The pinocchio model of a finalized (continuous or discrete) MultibodyPlant, and a map from
     each Drake body index to ``(pinocchio joint id, X_JB)``: the body frame's pose in the frame of
-    the pinocchio joint that carries it (world: joint 0).
+    the pinocchio joint that carries it (world: joint 0). The bodies' inertias are the plant's
+    defaults, but for those ``spatial_inertias`` gives (``{body index: SpatialInertia}``, about
+    the body origin, in the body frame; see
+    :class:`~drake_abs.multibody.drake_dynamics.ContactModelBase`).
 
     A QuaternionFloatingJoint becomes a free-flyer joint at the same coordinate offsets, whose
     coordinates differ from Drake's (see :class:`FreeJointCoordinates`).
@@ -70,6 +82,7 @@ def pinocchio_model_from_plant(plant: MultibodyPlant) -> tuple[pin.Model, dict]:
     if not plant.is_finalized():
         raise ValueError("plant must be finalized")
     context = plant.CreateDefaultContext()
+    apply_spatial_inertias(plant, context, spatial_inertias or {})
     model = pin.Model()
     model.gravity = pin.Motion(
         np.concatenate([plant.gravity_field().gravity_vector(), np.zeros(3)])
@@ -170,7 +183,7 @@ class PinocchioContactModel(ContactModelBase):
         plant = self.plant
         self._eye = np.eye(self.nq)
         self._lower = np.tril_indices(self.nv, -1)
-        self.pin_model, carried = pinocchio_model_from_plant(plant)
+        self.pin_model, carried = pinocchio_model_from_plant(plant, self.spatial_inertias)
         self.pin_data = self.pin_model.createData()
         free = self.pin_model.copy()
         free.gravity = pin.Motion.Zero()
@@ -213,10 +226,11 @@ class PinocchioContactModel(ContactModelBase):
         """Pinocchio's configuration at Drake's q (the same vector without free joints)."""
         return q if self._coords is None else self._coords.at(q).q_pin
 
-    def _read_placements(self, H: np.ndarray, b: int) -> None:
+    def _read_placements(self, H: np.ndarray, b: int, data=None) -> None:
         """Copy the placements (4 x 4) of the joints that carry contacts, after the last forward
-        kinematics, into ``H[b]`` (nj, 4, 4)."""
-        oMi = self.pin_data.oMi
+        kinematics on ``data`` (default: the model's own data), into ``H[b]`` (nj, 4, 4). The
+        kinematics must have run on that same data (a damped model has data of its own)."""
+        oMi = (self.pin_data if data is None else data).oMi
         for k, jid in enumerate(self._carriers):
             H[b, k] = oMi[jid].homogeneous
 
@@ -288,12 +302,12 @@ class PinocchioContactModel(ContactModelBase):
                 )
                 a[b] = data.ddq
                 J[b] = np.reshape(data.J, (6, nv))
-                self._read_placements(H, b)
+                self._read_placements(H, b, data)
         else:
             for b in range(B):
                 pin.computeJointJacobians(model, data, q[b])
                 J[b] = np.reshape(data.J, (6, nv))
-                self._read_placements(H, b)
+                self._read_placements(H, b, data)
                 a[b] = pin.aba(model, data, q[b], v[b], tau[b])
                 W[b] = pin.computeMinverse(model, data, q[b])
         upper = np.triu(W)  # pinocchio fills the upper triangle of M^-1

@@ -11,9 +11,11 @@ applies every setting the scene names.
 from __future__ import annotations
 
 import copy
+import difflib
 import functools
 import warnings
-from dataclasses import replace
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,13 +23,19 @@ from drake_abs.contact.contact_lcp import (
     FORMULATIONS,
     FrictionCone,
     ParameterDerivatives,
+    StepQuantities,
     contact_step,
 )
 from drake_abs.contact.damping import damped_parameters
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
-from drake_abs.multibody.drake_dynamics import ContactModelBase
+from drake_abs.multibody.drake_dynamics import (
+    INERTIA_ENTRIES,
+    ContactModelBase,
+    central_unit_inertia,
+    spatial_inertia,
+)
 from drake_abs.multibody.floating import normalize_quaternions
 from drake_abs.multibody.joint_limits import JointLimitRows, effort_limits, joint_damping
 
@@ -35,6 +43,30 @@ from drake_abs.multibody.joint_limits import JointLimitRows, effort_limits, join
 #: is solved again with it (see ``ComplementarityStepper._repair``)
 REPAIR_TOL = 1e-6
 MAX_REPAIRS = 3
+
+
+@dataclass(frozen=True)
+class ContactProblem:
+    """The inputs of one batched step's LCP (:meth:`ComplementarityStepper.contact_problem`).
+
+    Attributes:
+        quantities: the step's :class:`~drake_abs.contact.contact_lcp.StepQuantities` (no
+            state derivatives): W and v_free of the damped step, distances ``phi`` (m) and
+            rows ``Jn`` of the ``n_contacts`` candidates followed by the joint-limit rows,
+            tangent rows ``Jt``.
+        cone: the friction cone over those rows (joint-limit rows frictionless).
+        h: the time step (s).
+        parameters: derivatives in the model parameters ``theta_names`` (None unless asked).
+        theta_names: the columns of ``parameters``.
+        n_contacts: the number of contact candidates (the rows after them are joint limits).
+    """
+
+    quantities: StepQuantities
+    cone: FrictionCone
+    h: float
+    parameters: ParameterDerivatives | None
+    theta_names: tuple[str, ...]
+    n_contacts: int
 
 
 class StepOverflowWarning(UserWarning):
@@ -98,6 +130,17 @@ class ComplementarityStepper:
         #: makes it picklable: it is sent as the scene description and its settings, and
         #: rebuilt where it is unpickled (a Ray worker: :mod:`drake_abs.parallel`).
         self.scene = None
+        #: the model parameters :meth:`with_parameters` changed from the scene's, ``{name:
+        #: value}`` (pickled with the settings)
+        self._parameters: dict[str, float] = {}
+
+    def __copy__(self) -> ComplementarityStepper:
+        """A shallow copy (the same contact model), for :meth:`with_smoothing` and
+        :meth:`with_parameters`; without it ``copy.copy`` would go through :meth:`__reduce__`,
+        which rebuilds the stepper from its scene (or fails without one)."""
+        other = object.__new__(type(self))
+        other.__dict__.update(self.__dict__)
+        return other
 
     def __reduce__(self):
         """Pickled as its scene and settings (see :attr:`scene`); a stepper built from a contact
@@ -115,6 +158,8 @@ class ComplementarityStepper:
             activation_distance=self.activation_distance, friction=self.friction,
             **self._flags, **self.solver_options,
         )  # fmt: skip
+        if self._parameters:  # a stepper of with_parameters: the scene's, then its changes
+            settings["parameters"] = dict(self._parameters)
         return rebuild_stepper, (self.scene, settings)
 
     @property
@@ -138,7 +183,15 @@ class ComplementarityStepper:
           prismatic; ``"instance::joint"`` where a name occurs in several model instances),
           when this stepper applies joint damping (``damping=True``), also where it is 0;
         - ``"offset[i].x"``, ``".y"``, ``".z"`` (m) for every point candidate i: its point
-          ``p_BC`` in its body's frame.
+          ``p_BC`` in its body's frame;
+        - ``"unit_inertia[body].xx"``, ``".yy"``, ``".zz"``, ``".xy"``, ``".xz"``, ``".yz"``
+          (m^2) for every body with a mass: the entries of its rotational inertia about its
+          centre of mass, in its body frame, per unit mass (the rotational inertia is the mass
+          times this, so a mass column keeps this held; a product column moves both symmetric
+          entries of the matrix; Drake's sign convention, the matrix entries). These come last,
+          so the columns before them keep their indices.
+
+        :meth:`with_parameters` gives a stepper with other values of any of them.
         """
         m = self.model
         coeff = m.cone.coefficients
@@ -150,6 +203,11 @@ class ComplementarityStepper:
             + tuple(f"radius[{i}]" for i in points)
             + tuple(f"damping[{name}]" for name, _ in self._damping_joints)
             + tuple(f"offset[{i}].{axis}" for i in points for axis in "xyz")
+            + tuple(
+                f"unit_inertia[{name}].{entry}"
+                for name in m.massive_bodies
+                for entry in INERTIA_ENTRIES
+            )
         )
 
     @functools.cached_property
@@ -185,19 +243,97 @@ class ComplementarityStepper:
 
     def parameter_values(self) -> np.ndarray:
         """The values of :attr:`parameter_names` in this stepper's model (T,): the ground
-        height (m), the friction coefficients, the masses (kg), the point candidates' radii (m),
-        the joint damping (N m s / rad or N s / m), the point candidates' offsets (m)."""
+        height (m), the friction coefficients (dimensionless), the masses (kg), the point
+        candidates' radii (m), the joint damping (N m s / rad or N s / m), the point
+        candidates' offsets (m), the bodies' unit rotational inertias about their centres of
+        mass (m^2). The masses and inertias are those the dynamics use (the plant's defaults,
+        or those :meth:`with_parameters` set)."""
         m = self.model
         coeff = m.cone.coefficients
-        ctx = m.plant.CreateDefaultContext()
-        masses = [m.plant.get_body(index).get_mass(ctx) for _, index in m._massive]
+        inertias = [m.body_spatial_inertia(index) for _, index in m._massive]
+        rows, cols = np.array([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]).T
         points = [m.contacts[i] for i in m.point_contacts]
         return np.concatenate([
-            [m.ground.height], coeff[~np.isnan(coeff)], masses,
+            [m.ground.height], coeff[~np.isnan(coeff)], [M.get_mass() for M in inertias],
             [c.radius for c in points],
             [self.damping[v] for _, v in self._damping_joints],
             np.reshape([c.p_BC for c in points], -1),
+            np.reshape([central_unit_inertia(M)[rows, cols] for M in inertias], -1),
         ]).astype(float)  # fmt: skip
+
+    def with_parameters(self, values: np.ndarray | Mapping[str, float]) -> ComplementarityStepper:
+        """A stepper whose :meth:`parameter_values` are ``values`` (this one is left as it is):
+        an array of all of them in :attr:`parameter_names` order (T,), or a mapping ``{name:
+        value}`` of some of them (the others kept). Every column takes effect in the step and
+        its Jacobians: the ground height, each candidate's friction coefficient, each body's
+        mass (centre of mass and unit inertia held, so its rotational inertia scales with it,
+        as ``RigidBody.SetMass`` does) and unit inertia, each point candidate's radius and
+        offset, each joint's damping. The plant is shared (its default inertias cannot change
+        once finalized): the contact model is rebuilt on it with the bodies' inertias as
+        overrides (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.rebuilt`), no
+        model file is read. A stepper built from a scene stays picklable: it is sent as the
+        scene, its settings and the parameters changed.
+
+        Raises:
+            ValueError: for an array of another length, an unknown name, a value that is not a
+                finite number, a mass <= 0, a negative radius, friction coefficient or damping,
+                or a unit inertia that is not physically valid (its moments must satisfy the
+                triangle inequality).
+        """
+        names = self.parameter_names
+        current = self.parameter_values()
+        new = _parameter_vector(values, names, current)
+        value = dict(zip(names, new.tolist(), strict=True))
+        changed = {n: x for n, x, old in zip(names, new.tolist(), current, strict=True) if x != old}
+        m = self.model
+        ground = m.ground
+        if "ground_height" in changed:
+            ground = replace(ground, height=value["ground_height"])
+        rebuild = "ground_height" in changed
+        contacts = list(m.contacts)
+        for i, c in enumerate(contacts):
+            fields = {}
+            if f"friction[{i}]" in changed:
+                fields["friction"] = value[f"friction[{i}]"]
+            if f"radius[{i}]" in changed:
+                fields["radius"] = value[f"radius[{i}]"]
+            if any(f"offset[{i}].{a}" in changed for a in "xyz"):
+                fields["p_BC"] = tuple(value[f"offset[{i}].{a}"] for a in "xyz")
+            if fields:
+                contacts[i] = replace(c, **fields)
+                rebuild = True
+        inertias = dict(m.spatial_inertias)
+        for body, index in m._massive:
+            keys = [f"mass[{body}]"] + [f"unit_inertia[{body}].{e}" for e in INERTIA_ENTRIES]
+            if not any(k in changed for k in keys):
+                continue
+            G = [value[k] for k in keys[1:]]
+            rebuild = True
+            try:
+                inertias[int(index)] = spatial_inertia(
+                    value[keys[0]], m.body_spatial_inertia(index).get_com(), G
+                )
+            except RuntimeError:  # Drake's check of the inertia's physical validity
+                raise ValueError(
+                    f"values: unit_inertia[{body}] (xx, yy, zz, xy, xz, yz) = {tuple(G)} m^2 is "
+                    "not a physically valid unit inertia: its principal moments must be >= 0 and "
+                    "satisfy the triangle inequality"
+                ) from None
+        model = m
+        if rebuild:  # the provider, on the same plant
+            model = m.rebuilt(contacts=contacts, ground=ground, spatial_inertias=inertias)
+        damping = self.damping.copy()
+        for joint, v in self._damping_joints:
+            damping[v] = value[f"damping[{joint}]"]
+        other = copy.copy(self)
+        other.__dict__.pop("_cones", None)  # friction cones of this model
+        other.model = model
+        other.solver_options = dict(self.solver_options)
+        other.damping = damping
+        other._damps = bool(damping.any())
+        other._damping = damping if other._damps else None
+        other._parameters = {**self._parameters, **changed}
+        return other
 
     @property
     def smoothing_parameter_names(self) -> tuple[str, ...]:
@@ -208,8 +344,8 @@ class ComplementarityStepper:
     def _parameter_derivatives(self, idx, cone, q, v, u, names) -> ParameterDerivatives:
         """The theta block of one group's quantities (states q, v, u) for the columns
         ``names``: every contact's distance falls by the ground height's increase; each
-        frictional contact's coefficient is its own column; the masses move W and the free
-        velocity; a point candidate's radius and offset move its distance and its rows
+        frictional contact's coefficient is its own column; the masses and unit inertias move W
+        and the free velocity; a point candidate's radius and offset move its distance and its rows
         (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.point_parameter_derivatives`);
         the smoothing parameters (trailing columns) move mu only. The joint-damping columns are
         filled in later, on the damped step (:meth:`_joint_rows`)."""
@@ -224,11 +360,19 @@ class ComplementarityStepper:
             j = column.get(f"friction[{idx[local]}]")
             if j is not None:
                 dfriction[f, j] = 1.0
-        masses = [column[f"mass[{n}]"] for n in self.model.massive_bodies if f"mass[{n}]" in column]
+        # the inertial columns asked for, and their columns of the provider's derivatives
+        # (inertial_derivatives: every mass, then every body's six unit-inertia entries)
+        bodies = self.model.massive_bodies
+        inertial = [f"mass[{n}]" for n in bodies] + [
+            f"unit_inertia[{n}].{e}" for n in bodies for e in INERTIA_ENTRIES
+        ]
+        pairs = [(column[key], k) for k, key in enumerate(inertial) if key in column]
         dW = np.zeros((B, nv, nv, T))
         dv_free = np.zeros((B, nv, T))
-        if masses:
-            dW[..., masses], dv_free[..., masses] = self.model.mass_derivatives(q, v, u)
+        if pairs:
+            to, of = (list(x) for x in zip(*pairs, strict=True))
+            dW_i, dv_free_i = self.model.inertial_derivatives(q, v, u)
+            dW[..., to], dv_free[..., to] = dW_i[..., of], dv_free_i[..., of]
         # each candidate's geometry columns: radius, offset x, y, z (-1: not a column)
         geometry = np.array(
             [
@@ -350,6 +494,44 @@ class ComplementarityStepper:
                 stacklevel=2,
             )
         return Step(active=active[:, :nc], theta_names=names, **out)
+
+    def contact_problem(
+        self, x: np.ndarray, u: np.ndarray, *, parameters: bool = True
+    ) -> ContactProblem:
+        """The dynamics one step's LCP is built from, at states x (B, nq + nv) and inputs
+        u (B, nu) or (nu,), with every contact candidate and joint-limit row included (no
+        pruning) and the inputs clipped to the effort limits as :meth:`step` does: the inverse
+        mass matrix and free velocity of the (damped) step, the distances and rows, the
+        friction cone; with ``parameters``, their derivatives in :attr:`parameter_names`.
+
+        This is what a loss that does not solve the step needs (the violation-implicit loss of
+        :mod:`drake_abs.learning.scene_losses`): the step itself is ``contact_step`` of these
+        quantities."""
+        nq, nv, nu, nc = self.sizes
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        if x.ndim != 2 or x.shape[1] != nq + nv:
+            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
+        B = x.shape[0]
+        u = np.asarray(u, dtype=float)
+        if u.shape != (B, nu):
+            try:
+                u = np.broadcast_to(u, (B, nu))
+            except ValueError:
+                raise ValueError(f"u must have shape (B, nu) = ({B}, {nu}) or (nu,); got "
+                                 f"{u.shape}") from None  # fmt: skip
+        if not (np.isfinite(x).all() and np.isfinite(u).all()):
+            raise ValueError("x and u must be finite")
+        if self._clips:
+            u = np.clip(u, -self.effort, self.effort)
+        q, v = x[:, :nq], x[:, nq:]
+        idx = np.arange(nc)
+        lidx = np.arange(self.limits.size)
+        quant = self.model.quantities(q, v, u, idx, derivatives=False, damping=self._damping)
+        cone = self._cone(idx, lidx.size)
+        names = self.parameter_names if parameters else ()
+        par = self._parameter_derivatives(idx, cone, q, v, u, names) if parameters else None
+        quant, par = self._joint_rows(quant, par, q, lidx, False, names)
+        return ContactProblem(quant, cone, float(self.model.h), par, names, nc)
 
     def _cone(self, idx: np.ndarray, n_limits: int = 0) -> FrictionCone:
         """The friction cone of the candidates ``idx`` under this stepper's formulation, with
@@ -545,6 +727,60 @@ class ComplementarityStepper:
                 out[key][:, cols] = value
             else:
                 out[key][np.ix_(rows, cols)] = value
+
+
+#: the lower ends of the model parameters' ranges, by name prefix: (bound, strict, unit)
+_PARAMETER_RANGES = {
+    "friction[": (0.0, False, ""),
+    "mass[": (0.0, True, " kg"),
+    "radius[": (0.0, False, " m"),
+    "damping[": (0.0, False, " N m s / rad or N s / m"),
+}
+
+
+def _parameter_vector(values, names: tuple[str, ...], current: np.ndarray) -> np.ndarray:
+    """The parameter vector (T,) that :meth:`ComplementarityStepper.with_parameters`'s
+    ``values`` give (an array in ``names`` order, or a mapping of some names to values, the
+    others ``current``), checked: finite, and each within its range."""
+    T = len(names)
+    expected = (
+        f"an array of all {T} parameter values in parameter_names order, or a mapping "
+        "{name: value} of some of them"
+    )
+    if isinstance(values, Mapping):
+        new = np.array(current, dtype=float)
+        index = {n: j for j, n in enumerate(names)}
+        for key, x in values.items():
+            if key not in index:
+                close = difflib.get_close_matches(str(key), names, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ValueError(
+                    f"values: unknown parameter name {key!r}{hint}; values must be {expected}, "
+                    f"with names from parameter_names: {', '.join(names)}"
+                )
+            try:
+                new[index[key]] = float(x)
+            except (TypeError, ValueError):
+                raise ValueError(f"values[{key!r}] must be a number; got {x!r}") from None
+    else:
+        try:
+            new = np.array(values, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"values must be {expected}; got {type(values).__name__} {values!r:.80}"
+            ) from None
+        if new.shape != (T,):
+            raise ValueError(f"values must be {expected}; got an array of shape {new.shape}")
+    for j, name in enumerate(names):
+        x = new[j]
+        if not np.isfinite(x):
+            raise ValueError(f"values[{name!r}] must be finite; got {x}")
+        for prefix, (bound, strict, unit) in _PARAMETER_RANGES.items():
+            if name.startswith(prefix) and (x <= bound if strict else x < bound):
+                raise ValueError(
+                    f"values[{name!r}] must be {'>' if strict else '>='} {bound:g}{unit}; got {x}"
+                )
+    return new
 
 
 def _groups_by_active_set(active: np.ndarray) -> list[tuple]:

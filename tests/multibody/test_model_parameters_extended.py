@@ -128,7 +128,7 @@ def test_parameter_names_are_unique_and_values_follow_them(name):
     nc, nb = len(cm.contacts), len(cm.massive_bodies)
     points = cm.point_contacts
     assert points.tolist() == list(range(nc))  # every candidate here is a point or sphere
-    # the order: ground, friction, masses, radii, damping, offsets
+    # the order: ground, friction, masses, radii, damping, offsets, unit inertias
     start = 1 + nc + nb
     assert names[start : start + nc] == tuple(f"radius[{i}]" for i in range(nc))
     np.testing.assert_array_equal(values[start : start + nc], [c.radius for c in cm.contacts])
@@ -140,11 +140,24 @@ def test_parameter_names_are_unique_and_values_follow_them(name):
         values[start + nc : start + nc + len(one_dof)],
         [j.default_damping_vector()[0] for j in one_dof],
     )
-    offsets = names[start + nc + len(one_dof) :]
+    start += nc + len(one_dof)
+    offsets = names[start : start + 3 * nc]
     assert offsets == tuple(f"offset[{i}].{a}" for i in range(nc) for a in "xyz")
     np.testing.assert_array_equal(
-        values[start + nc + len(one_dof) :], np.reshape([c.p_BC for c in cm.contacts], -1)
+        values[start : start + 3 * nc], np.reshape([c.p_BC for c in cm.contacts], -1)
     )
+    # last (so that the columns before keep their indices): each body's unit inertia about its
+    # centre of mass (m^2), its rotational inertia about the centre of mass over its mass
+    inertias = names[start + 3 * nc :]
+    entries = ("xx", "yy", "zz", "xy", "xz", "yz")
+    assert inertias == tuple(f"unit_inertia[{b}].{e}" for b in cm.massive_bodies for e in entries)
+    ctx = cm.plant.CreateDefaultContext()
+    for k, body in enumerate(cm.massive_bodies):
+        M = cm.plant.GetBodyByName(body).CalcSpatialInertiaInBodyFrame(ctx)
+        I_com = M.Shift(M.get_com()).CalcRotationalInertia().CopyToFullMatrix3()
+        want = I_com[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]] / M.get_mass()
+        got = values[start + 3 * nc + 6 * k : start + 3 * nc + 6 * (k + 1)]
+        np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-18)
     # without joint damping in the step, damping is no parameter
     undamped = ComplementarityStepper(cm, damping=False)
     assert not any(n.startswith("damping[") for n in undamped.parameter_names)

@@ -1,0 +1,305 @@
+"""Complementarity-model-based FOPG (Zhang et al. 2023, Algorithm 2) in closed loop with MuJoCo:
+learn our model's parameters from MuJoCo's Hopper, train a policy with FOPG-ABS in the learned
+model, run it in MuJoCo, add what it saw to the data, and repeat.
+
+Three arms train the same linear policy of gymnasium's observation with the same FOPG-ABS
+settings and the same number of policy iterations, and are evaluated in MuJoCo's own
+``Hopper-v5`` (frame skip chosen so that one MuJoCo step is one step of our scene):
+
+- ``learned`` (Algorithm 2): the model's parameters theta (ground height, one friction
+  coefficient, the masses, the damping of the damped joints) start off the model file's
+  (seeded: the ground ``ground_offset`` m up, the others scaled within
+  ``1 +- perturbation``). Round 0 collects ``initial_episodes`` MuJoCo episodes under random
+  inputs. Each round then (1) fits theta to
+  all the data so far (``fit``: the violation-implicit loss by L-BFGS-B, or random search on
+  eq. 6.1 as in the paper), warm-started from the last round's; (2) runs
+  ``policy_iterations`` FOPG-ABS iterations in the learned model, continuing from the last
+  round's policy; (3) runs that policy with exploration noise in MuJoCo for
+  ``episodes_per_round`` episodes, whose transitions join the data;
+- ``file``: the same policy iterations in the model with the file's parameters (what a user
+  with the right model gets);
+- ``start``: the same in the model with the starting (wrong) parameters and no learning.
+
+After every round each arm's deterministic policy is evaluated in MuJoCo (``eval_episodes``
+episodes from gymnasium's resets, gymnasium's reward and termination, ``eval_steps`` steps) and
+on our plant with the file's parameters. Outputs in ``out``: ``summary.json``,
+``rounds.csv``, ``closed_loop.png``, ``policies/`` (the final policies, npz + json).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from drake_abs.contact.smoothing import ContactAware
+from drake_abs.experiments._common import file_list, progress, results_dir
+
+NAME = "model-based-fopg"
+ARMS = ("learned", "file", "start")
+
+
+@dataclass(frozen=True)
+class Config:
+    """Sizes. ``contact_aware`` is (mu_max, length m) of the adaptive smoothing the policy is
+    trained through (larger mu: smoother); ``eps`` the violation loss's relaxation."""
+
+    task: str = "hopper"
+    rounds: int = 4
+    initial_episodes: int = 4
+    episodes_per_round: int = 4
+    steps: int = 100
+    policy_iterations: int = 15
+    rollouts: int = 16
+    horizon: int = 100
+    sigma: float = 0.1
+    learning_rate: float = 0.01
+    contact_aware: tuple[float, float] = (1e-2, 0.05)
+    fit: str = "violation_implicit"
+    eps: float = 1e-3
+    fit_iterations: int = 20
+    search_directions: int = 4
+    max_transitions: int = 800
+    ground_offset: float = 0.02
+    perturbation: float = 0.3
+    eval_episodes: int = 4
+    eval_steps: int = 200
+    seed: int = 0
+
+    @classmethod
+    def test_size(cls) -> Config:
+        return cls(rounds=1, initial_episodes=1, episodes_per_round=1, steps=10,
+                   policy_iterations=1, rollouts=2, horizon=6, fit_iterations=2,
+                   max_transitions=20, eval_episodes=1, eval_steps=10)  # fmt: skip
+
+    def check(self) -> None:
+        if self.task not in ("hopper", "half_cheetah"):
+            raise ValueError(f"task must be 'hopper' or 'half_cheetah'; got {self.task!r}")
+        if self.fit not in ("violation_implicit", "explicit", "naive_implicit", "random_search"):
+            raise ValueError(
+                "fit must be 'violation_implicit', 'explicit', 'naive_implicit' or "
+                f"'random_search'; got {self.fit!r}"
+            )
+        for name in ("rounds", "initial_episodes", "steps", "policy_iterations", "rollouts",
+                     "horizon", "fit_iterations", "eval_episodes", "eval_steps"):  # fmt: skip
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)!r}")
+
+
+class NoisyPolicy:
+    """The task's policy of the observation with Gaussian exploration noise ``sigma`` (action
+    units), as torques: ``u = clip(gears (inner(obs(x)) + sigma xi), -effort, effort)``. Its
+    noise is reseeded at every episode (``reset(seed)``) by the data source."""
+
+    def __init__(self, task, inner, theta, sigma: float, effort: np.ndarray):
+        self.task, self.inner, self.theta = task, inner, np.asarray(theta, float)
+        self.sigma, self.effort = float(sigma), np.asarray(effort, float)
+        self.gears = np.asarray(task.stepper.scale, float)
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, seed: int | None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, x, t: int) -> np.ndarray:
+        obs = self.task.observation(np.asarray(x, float)[None])
+        a = self.inner.act(self.theta, obs)[0] + self.sigma * self.rng.standard_normal(
+            self.gears.size)  # fmt: skip
+        return np.clip(self.gears * a, -self.effort, self.effort)
+
+
+def with_model(task, values: dict):
+    """The locomotion task with its stepper's model parameters set to ``values``."""
+    from drake_abs.tasks.adapters import ActionScaled
+
+    inner = task.stepper.stepper.with_parameters(values)
+    return replace(task, stepper=ActionScaled(inner, task.stepper.scale))
+
+
+def _locomotion_config(config: Config):
+    from drake_abs.experiments.locomotion import Config as LocomotionConfig
+
+    return LocomotionConfig(
+        tasks=(config.task,), methods=("fopg_abs",), seeds=(config.seed,),
+        iterations=config.policy_iterations, rollouts=config.rollouts, horizon=config.horizon,
+        sigma=config.sigma, learning_rate=config.learning_rate,
+        contact_aware=config.contact_aware, eval_episodes=1, eval_horizon=1,
+    )  # fmt: skip
+
+
+def run(config: Config | None = None, out: str | Path | None = None) -> dict:
+    from drake_abs.experiments import model_learning as ml
+    from drake_abs.experiments import transition_sources as ts
+    from drake_abs.experiments.locomotion import train_method
+    from drake_abs.experiments.locomotion_transfer import (
+        evaluate_gymnasium,
+        make_gymnasium,
+        same_period_frame_skip,
+        statistics,
+    )
+    from drake_abs.policy.policies import LinearPolicy
+    from drake_abs.policy.saving import save_policy
+    from drake_abs.tasks.locomotion import TASKS, locomotion_task
+
+    config = Config() if config is None else config
+    config.check()
+    folder = results_dir(NAME, out)
+    start_time = time.perf_counter()
+    scene = TASKS[config.task].scene
+    env_id = TASKS[config.task].env_id
+    smoothing = ContactAware(*config.contact_aware)
+    base = locomotion_task(config.task, smoothing=smoothing)
+    true_task = locomotion_task(config.task)  # exact contact, the file's parameters
+    model = base.stepper.stepper
+    names = ml.learned_names(model)
+    truth = ml._values(model, names)
+    rng = np.random.default_rng(config.seed)
+    learning = ml.Config(ground_offset=config.ground_offset, perturbation=config.perturbation,
+                         eps=config.eps, gradient_iterations=config.fit_iterations,
+                         search_iterations=config.fit_iterations,
+                         search_directions=config.search_directions,
+                         max_transitions=config.max_transitions, seed=config.seed)  # fmt: skip
+    theta_start, scale, lo, hi = ml.start_and_scale(names, truth, learning, rng)
+
+    def values_of(theta) -> dict:
+        from drake_abs.learning.scene_losses import ModelLoss
+
+        x1 = np.zeros((1, base.nx))
+        return_loss = ModelLoss(model, x1, np.zeros((1, base.nu)), x1, names)
+        return {
+            model.parameter_names[c]: float(v)
+            for cols, v in zip(return_loss.groups, theta, strict=True)
+            for c in cols
+        }
+
+    frame = same_period_frame_skip(env_id, base.dt)
+    env = make_gymnasium(env_id, config.eval_steps, frame["frame_skip"])
+    inner = LinearPolicy(base.n_obs, base.nu)
+    eval_seeds = [10_000 + i for i in range(config.eval_episodes)]
+
+    def evaluate(theta_pi) -> dict:
+        def actor(obs, state):
+            return inner.act(theta_pi, np.asarray(obs, float)[None])[0]
+
+        mujoco_stats = statistics(evaluate_gymnasium(env, actor, eval_seeds, config.eval_steps))
+        ours = ml_evaluate(true_task, theta_pi, config)
+        return {"mujoco_return": mujoco_stats["return_mean"],
+                "mujoco_return_std": mujoco_stats["return_std"],
+                "mujoco_length": mujoco_stats["length_mean"], "our_return": ours}  # fmt: skip
+
+    # round 0: random inputs in MuJoCo
+    low, high = ts.control_range(scene)
+    data = ts.mujoco_transitions(scene, ts.random_policy(low.size, low, high, config.seed),
+                                 config.initial_episodes, config.steps, config.seed)  # fmt: skip
+    loc = _locomotion_config(config)
+    x_eval = base.initial_states(np.random.default_rng([config.seed, 2]), 1)
+    tasks = {"file": base, "start": with_model(base, values_of(theta_start))}
+    theta_pi = {arm: np.zeros(inner.n_params) for arm in ARMS}
+    theta_model = theta_start.copy()
+    rows, fits = [], []
+    for arm in ARMS:
+        rows.append({"round": 0, "arm": arm, "transitions": int(data.x.shape[0]),
+                     **evaluate(theta_pi[arm])})  # fmt: skip
+    for k in progress(range(1, config.rounds + 1), desc=NAME):
+        # (1) the model update on all data so far, from the last round's theta
+        t0 = time.perf_counter()
+        result = ml.fit(model, (data.x, data.u, data.x_next), config.fit, names, theta_model,
+                        scale, lo, hi, learning, config.seed + k)  # fmt: skip
+        theta_model = result.theta
+        fits.append({"round": k, "theta": theta_model.tolist(), "loss": result.loss,
+                     "seconds": time.perf_counter() - t0,
+                     "unconverged_evaluations": result.unconverged_evaluations})  # fmt: skip
+        tasks["learned"] = with_model(base, values_of(theta_model))
+        # (2) the policy update in each arm's model
+        seconds = {}
+        for arm in ARMS:
+            t0 = time.perf_counter()
+            run_k = train_method(tasks[arm], "fopg_abs", loc, config.seed * 100 + k, x_eval,
+                                 theta0=theta_pi[arm])  # fmt: skip
+            theta_pi[arm] = run_k["theta"]
+            seconds[arm] = time.perf_counter() - t0
+        # (3) the learned arm's policy, with exploration noise, in MuJoCo: new data
+        policy = NoisyPolicy(base, inner, theta_pi["learned"], config.sigma, high)
+        new = ts.mujoco_transitions(scene, policy, config.episodes_per_round, config.steps,
+                                    config.seed * 100 + k)  # fmt: skip
+        data = data.concatenate(new)
+        for arm in ARMS:
+            rows.append({"round": k, "arm": arm, "transitions": int(data.x.shape[0]),
+                         "train_seconds": seconds[arm], **evaluate(theta_pi[arm])})  # fmt: skip
+    env.close()
+    policies = folder / "policies"
+    policies.mkdir(exist_ok=True)
+    saved = {}
+    for arm in ARMS:
+        paths = save_policy(policies / f"{config.task}_{arm}", base.policy(inner),
+                            theta_pi[arm], task=config.task,
+                            config={"arm": arm, **asdict(config)})  # fmt: skip
+        saved[arm] = str(paths["json"])
+    files = {"rounds": _write_rounds(folder / "rounds.csv", rows),
+             "plot": _plot(folder / "closed_loop.png", rows, config)}  # fmt: skip
+    summary = {
+        "experiment": NAME, "config": asdict(config), "names": names, "file": truth.tolist(),
+        "start": theta_start.tolist(), "learned": theta_model.tolist(), "fits": fits,
+        "rows": rows, "frame": frame, "policies": saved,
+        "seconds": time.perf_counter() - start_time, "files": file_list(files),
+    }  # fmt: skip
+    (folder / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    summary["files"]["summary"] = str(folder / "summary.json")
+    return summary
+
+
+def ml_evaluate(task, theta_pi, config: Config) -> float:
+    """The deterministic return on our plant (exact contact, the file's parameters) from
+    gymnasium's reset states, over ``eval_steps`` steps."""
+    from drake_abs.experiments.locomotion import evaluate
+
+    x0s = task.initial_states(np.random.default_rng([config.seed, 3]), config.eval_episodes)
+    return evaluate(task, theta_pi, x0s, config.eval_steps)
+
+
+def _write_rounds(path: Path, rows: list[dict]) -> Path:
+    keys = ["round", "arm", "transitions", "mujoco_return", "mujoco_return_std",
+            "mujoco_length", "our_return", "train_seconds"]  # fmt: skip
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(keys)
+        for r in rows:
+            w.writerow([r.get(k, "") for k in keys])
+    return path
+
+
+def _plot(path: Path, rows: list[dict], config: Config) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for arm in ARMS:
+        mine = [r for r in rows if r["arm"] == arm]
+        ax.plot([r["round"] for r in mine], [r["mujoco_return"] for r in mine], "o-", label=arm)
+    ax.set_xlabel("round (model fit + policy iterations + MuJoCo episodes)")
+    ax.set_ylabel(f"MuJoCo return ({config.eval_steps} steps)")
+    ax.set_title(f"Algorithm 2 in closed loop: {config.task}", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def report(summary: dict) -> str:
+    lines = [f"# Model-based FOPG in closed loop with MuJoCo ({summary['seconds']:.0f} s)", "",
+             "| parameter | file | start | learned |", "| --- | --- | --- | --- |"]  # fmt: skip
+    for j, name in enumerate(summary["names"]):
+        lines.append(f"| {name} | {summary['file'][j]:.4g} | {summary['start'][j]:.4g} | "
+                     f"{summary['learned'][j]:.4g} |")  # fmt: skip
+    lines += ["", "| round | arm | MuJoCo return | our plant's return |",
+              "| --- | --- | --- | --- |"]  # fmt: skip
+    for r in summary["rows"]:
+        lines.append(f"| {r['round']} | {r['arm']} | {r['mujoco_return']:.1f} "
+                     f"± {r['mujoco_return_std']:.1f} | {r['our_return']:.1f} |")  # fmt: skip
+    return "\n".join(lines)

@@ -1,0 +1,151 @@
+"""The losses of drake_abs.learning.scene_losses on multibody scenes: the violation-implicit loss
+on a falling box equals the 1-D toy's (an independent implementation), every loss's gradient
+equals central differences of the loss at moved parameters, and on data from the model itself
+the losses vanish at the true parameters and not elsewhere."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from drake_abs.contact.smoothing import ContactAware, Exact
+from drake_abs.learning import GroundToy
+from drake_abs.learning.scene_losses import (
+    ModelLoss,
+    explicit_loss,
+    naive_implicit_loss,
+    violation_implicit_loss,
+)
+from drake_abs.multibody import Scene, build_scene_model
+
+# a 1 kg box on prismatic x and z joints, one frictionless point 0.1 m below its centre: the
+# vertical motion is the toy's point mass (time step 5 ms, as the toy's)
+FALLING_BOX = {
+    "name": "falling_box",
+    "time_step": 0.005,
+    "models": [{"file": "drake_abs:models/box_translating.sdf"}],
+    "contacts": [{"body": "box", "points": [[0.0, 0.0, -0.1]]}],
+    "friction_directions": 2,
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("eps", [0.25, 1e-2])
+def test_violation_loss_on_a_falling_box_equals_the_toys(eps):
+    toy = GroundToy()
+    stepper = build_scene_model(Scene.from_dict(FALLING_BOX)).stepper()
+    assert stepper.parameter_names[0] == "ground_height"
+    rng = np.random.default_rng(0)
+    theta_true, theta = 0.0, 0.03
+    z, v, y = toy.sample(rng, 200, theta_true, noise=0.05)
+    z = np.minimum(z, 0.05)  # near the ground, so that contact and the violation matter
+    N = z.size
+    x = np.stack([np.zeros(N), z + 0.1, np.zeros(N), v], axis=1)  # q = (x, z_box), v = (vx, vz)
+    x_next = np.stack([np.zeros(N), z + 0.1 + toy.dt * y, np.zeros(N), y], axis=1)
+    # weights: only vz, with 2 = the toy's prediction term has no 1/2
+    ours = violation_implicit_loss(
+        stepper.with_parameters({"ground_height": theta}), x, np.zeros((N, 1)), x_next, eps,
+        names=["ground_height"], weights=[0.0, 0.0, 0.0, 2.0],
+    )  # fmt: skip
+    ref = toy.violation_implicit_loss(theta, z, v, y, eps)
+    assert ours.all_converged and ref.converged.all()
+    np.testing.assert_allclose(ours.per_transition, ref.loss, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(ours.grad[0], ref.grad[:, 0].mean(), rtol=1e-9, atol=1e-12)
+    assert ours.loss > 0 and abs(ours.grad[0]) > 1e-3
+
+
+def _data(name: str, friction: str, n: int = 48, seed: int = 0):
+    """Transitions of the scene's own exact stepper from states around x0 (in contact)."""
+    scene = replace(Scene.load(name), friction_model=friction)
+    model = build_scene_model(scene)
+    stepper = model.stepper()
+    nq, nv, nu, _ = stepper.sizes
+    rng = np.random.default_rng(seed)
+    x = np.repeat(model.x0[None], n, axis=0)
+    x[:, nq:] += 0.3 * rng.standard_normal((n, nv))
+    if name == "hopper":  # the foot just above the ground, falling
+        x[:, nq + 1] -= 2.0
+    u = rng.uniform(-3.0, 3.0, (n, nu))
+    step = stepper.step(x, u, jacobians=False)
+    assert step.converged.all() and step.active.any()
+    return stepper, x, u, step.x_next
+
+
+CASES = [("box_push", "stewart_trinkle"), ("box_push", "anitescu"), ("hopper", "anitescu")]
+
+
+@pytest.mark.parametrize("name, friction", CASES, ids=["-".join(c) for c in CASES])
+@pytest.mark.parametrize("kind", ["explicit", "violation_implicit"])
+def test_loss_gradients_match_central_differences(name, friction, kind):
+    stepper, x, u, x_next = _data(name, friction)
+    if kind == "explicit":
+        stepper = stepper.with_smoothing(ContactAware(1e-3, 0.02))  # differentiable everywhere
+    rng = np.random.default_rng(1)
+    observed = x_next + 0.01 * rng.standard_normal(x_next.shape)  # the data are not the model's
+    all_names, values = stepper.parameter_names, stepper.parameter_values()
+    # every kind of column: a tied friction coefficient, masses, radii (where not at their
+    # bound 0), two offsets, an inertia
+    names = ["ground_height", "friction[*]"]
+    names += [n for n in all_names if n.startswith("mass[")][:3]
+    names += [
+        n for n, v in zip(all_names, values, strict=True) if n.startswith("radius[") and v > 0
+    ][:2]
+    names += [n for n in all_names if n.startswith("offset")][:2]
+    names += [n for n in all_names if n.startswith("unit_inertia") and n.endswith(".yy")][:1]
+    loss = ModelLoss(stepper, x, u, observed, names, kind, eps=1e-2)
+    theta = np.array([values[all_names.index(n.replace("*", "0"))] for n in names])
+    at = loss(theta)
+    assert at.all_converged and at.loss > 0
+    for j, name_j in enumerate(names):
+        d = 1e-6 * max(1.0, abs(theta[j]))
+        plus, minus = theta.copy(), theta.copy()
+        plus[j] += d
+        minus[j] -= d
+        fd = (loss(plus).loss - loss(minus).loss) / (2 * d)
+        np.testing.assert_allclose(at.grad[j], fd, rtol=1e-4, atol=1e-6 * (1 + abs(at.loss)),
+                                   err_msg=name_j)  # fmt: skip
+    assert np.abs(at.grad).max() > 1e-4
+
+
+@pytest.mark.parametrize("name, friction", [("box_push", "anitescu"), ("hopper", "anitescu")])
+def test_losses_vanish_at_the_true_parameters_only(name, friction):
+    """On the model's own (Anitescu, exact) data every loss is ~0 at the true parameters, and
+    clearly positive with the ground 2 cm off."""
+    stepper, x, u, x_next = _data(name, friction)
+    for kind in ("explicit", "naive_implicit", "violation_implicit"):
+        loss = ModelLoss(stepper, x, u, x_next, ["ground_height"], kind, eps=1e-2)
+        h0 = stepper.parameter_values()[0]
+        assert loss(np.array([h0])).loss < 1e-10, kind
+        assert loss(np.array([h0 + 0.02])).loss > 1e-6, kind
+
+
+def test_naive_implicit_is_the_exact_explicit_loss():
+    stepper, x, u, x_next = _data("box_push", "stewart_trinkle")
+    smoothed = stepper.with_smoothing(ContactAware(1e-2, 0.05))
+    observed = x_next + 0.01
+    naive = naive_implicit_loss(smoothed, x, u, observed)
+    exact = explicit_loss(stepper.with_smoothing(Exact()), x, u, observed)
+    smooth = explicit_loss(smoothed, x, u, observed)
+    np.testing.assert_array_equal(naive.per_transition, exact.per_transition)
+    assert not np.allclose(smooth.per_transition, exact.per_transition)
+
+
+def test_bad_input_is_named():
+    stepper, x, u, x_next = _data("box_push", "anitescu", n=4)
+    with pytest.raises(ValueError, match="x_next"):
+        explicit_loss(stepper, x, u, x_next[:, :-1])
+    with pytest.raises(ValueError, match="u must"):
+        explicit_loss(stepper, x, u[:, :0], x_next)
+    with pytest.raises(ValueError, match="eps"):
+        violation_implicit_loss(stepper, x, u, x_next, 0.0)
+    with pytest.raises(ValueError, match="names"):
+        ModelLoss(stepper, x, u, x_next, ["no_such_parameter"])
+    with pytest.raises(ValueError, match="kind"):
+        ModelLoss(stepper, x, u, x_next, ["ground_height"], "implicit")
+    with pytest.raises(ValueError, match="eps"):
+        ModelLoss(stepper, x, u, x_next, ["ground_height"], "violation_implicit")
+    with pytest.raises(ValueError, match="weights"):
+        explicit_loss(stepper, x, u, x_next, weights=np.ones(2))
+    with pytest.raises(ValueError, match="theta"):
+        ModelLoss(stepper, x, u, x_next, ["ground_height"])(np.zeros(2))
