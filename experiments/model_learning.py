@@ -178,7 +178,8 @@ def fit(stepper, data, fit_name: str, names, start, scale, lo, hi, config: Confi
     rng = np.random.default_rng(seed)
     x, u, x_next = _subsample(*data, config.max_transitions, rng)
     if fit_name == "random_search":
-        loss = ModelLoss(stepper.with_smoothing(Exact()), x, u, x_next, names, "explicit")
+        loss = ModelLoss(stepper.with_smoothing(Exact()), x, u, x_next, names, "explicit",
+                         gradient=False)  # fmt: skip
         return fit_random_search(loss, start, scale, iterations=config.search_iterations,
                                  directions=config.search_directions, lower=lo, upper=hi,
                                  seed=seed)  # fmt: skip

@@ -126,23 +126,41 @@ def _grouped(d: np.ndarray, groups: list) -> np.ndarray:
     return np.stack([d[..., cols].sum(axis=-1) for cols in groups], axis=-1)
 
 
-def explicit_loss(stepper, x, u, x_next, *, names=None, weights=None) -> LossValue:
+def _needed(all_names, groups) -> tuple[list[str], list[list[int]]]:
+    """The stepper columns the groups use (sorted), and each group's positions among them."""
+    cols = sorted({c for g in groups for c in g})
+    return [all_names[c] for c in cols], [[cols.index(c) for c in g] for g in groups]
+
+
+def explicit_loss(
+    stepper, x, u, x_next, *, names=None, weights=None, gradient: bool = True
+) -> LossValue:
     """Eq. 6.1 (module docstring) at the stepper's parameters, through its step at its
-    smoothing, with the gradient in ``names`` (default: all of ``stepper.parameter_names``)."""
+    smoothing, with the gradient in ``names`` (default: all of ``stepper.parameter_names``);
+    ``gradient=False``: the loss alone (``grad`` is NaN), at the cost of plain steps."""
     x, u, x_next = _data(stepper, x, u, x_next)
     groups, names = _columns(stepper.parameter_names, names)
     w = _weights(weights, x.shape[1])
-    step = stepper.step(x, u, parameters=True)
+    if not gradient:
+        step = stepper.step(x, u, jacobians=False)
+        r = step.x_next - x_next
+        per = 0.5 * np.einsum("ni,i,ni->n", r, w, r)
+        grad = np.full(len(groups), np.nan)
+        return LossValue(float(per.mean()), grad, per, np.asarray(step.converged, bool), names)
+    needed, local = _needed(stepper.parameter_names, groups)
+    step = stepper.step(x, u, parameters=needed)
     r = step.x_next - x_next
     per = 0.5 * np.einsum("ni,i,ni->n", r, w, r)
-    grad = np.einsum("ni,i,nit->t", r, w, _grouped(step.dx_dtheta, groups)) / x.shape[0]
+    grad = np.einsum("ni,i,nit->t", r, w, _grouped(step.dx_dtheta, local)) / x.shape[0]
     return LossValue(float(per.mean()), grad, per, np.asarray(step.converged, bool), names)
 
 
-def naive_implicit_loss(stepper, x, u, x_next, *, names=None, weights=None) -> LossValue:
+def naive_implicit_loss(
+    stepper, x, u, x_next, *, names=None, weights=None, gradient: bool = True
+) -> LossValue:
     """Their eq. 3: the explicit loss under exact contact (module docstring)."""
     return explicit_loss(stepper.with_smoothing(Exact()), x, u, x_next, names=names,
-                         weights=weights)  # fmt: skip
+                         weights=weights, gradient=gradient)  # fmt: skip
 
 
 def violation_implicit_loss(
@@ -159,9 +177,8 @@ def violation_implicit_loss(
     nq, nv, _, _ = stepper.sizes
     w = _weights(weights, nq + nv)
     groups, names = _columns(stepper.parameter_names, names)
-    cols = sorted({c for g in groups for c in g})  # the columns needed, then summed per group
-    local = [[cols.index(c) for c in g] for g in groups]
-    prob = stepper.contact_problem(x, u, parameters=True)
+    needed, local = _needed(stepper.parameter_names, groups)  # summed per group at the end
+    prob = stepper.contact_problem(x, u, parameters=needed)
     Q, cone, h, par = prob.quantities, prob.cone, prob.h, prob.parameters
     g = cone.generators
     fr = g.tangent >= 0
@@ -182,21 +199,21 @@ def violation_implicit_loss(
     g0 = np.concatenate([Q.q + np.einsum("nqj,nj->nq", hN, Q.v_free), Q.v_free], axis=1)
     D = np.concatenate([np.einsum("nqj,njg->nqg", hN, Dv), Dv], axis=1)
     # the theta columns kept
-    T = len(cols)
-    dphi_rows = par.dphi[..., cols]
+    T = len(needed)
+    dphi_rows = par.dphi
     ng = g.size
     dalpha = np.zeros((ng, T))
-    dalpha[fr] = par.dfriction[g.friction[fr]][:, cols]
+    dalpha[fr] = par.dfriction[g.friction[fr]]
     dG = Jt_g[..., None] * dalpha[None, :, None, :]
     if par.dJn is not None:
-        dG = dG + par.dJn[:, g.contact][..., cols]
+        dG = dG + par.dJn[:, g.contact]
     if par.dJt is not None:
-        dG = dG + a[..., None] * tangents(par.dJt[..., cols])
+        dG = dG + a[..., None] * tangents(par.dJt)
     dphi = dphi_rows[:, g.contact] + h * np.einsum("ngjt,nj->ngt", dG, v_obs)
     dDv = np.einsum("nij,ngjt->nigt", Q.W, dG)
     if par.dW is not None:
-        dDv = dDv + np.einsum("nijt,ngj->nigt", par.dW[..., cols], G)
-    dvf = np.zeros((N, nv, T)) if par.dv_free is None else par.dv_free[..., cols]
+        dDv = dDv + np.einsum("nijt,ngj->nigt", par.dW, G)
+    dvf = np.zeros((N, nv, T)) if par.dv_free is None else par.dv_free
     dg0 = np.concatenate([np.einsum("nqj,njt->nqt", hN, dvf), dvf], axis=1)
     dD = np.concatenate([np.einsum("nqj,njgt->nqgt", hN, dDv), dDv], axis=1)
     s = np.sqrt(0.5 * w)  # 1/2 ||.||_w^2 = ||s .||^2
@@ -223,10 +240,11 @@ class ModelLoss:
             or ``"violation_implicit"`` (needs ``eps``).
         eps: the violation weight's inverse (larger: looser complementarity).
         weights: (nq + nv,) state weights (default ones).
+        gradient: compute the gradient (False: the loss alone, for random search).
     """
 
     def __init__(self, stepper, x, u, x_next, names: Sequence[str], kind: str = "explicit",
-                 eps: float | None = None, weights=None):  # fmt: skip
+                 eps: float | None = None, weights=None, gradient: bool = True):  # fmt: skip
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
         if kind == "violation_implicit" and eps is None:
@@ -239,6 +257,12 @@ class ModelLoss:
         self.kind = kind
         self.eps = eps
         self.weights = _weights(weights, self.x.shape[1])
+        self.gradient = bool(gradient)
+        if not self.gradient and kind == "violation_implicit":
+            raise ValueError(
+                "gradient=False is for the explicit and naive-implicit losses (the violation "
+                "loss's gradient costs little beyond its value)"
+            )
         self.evaluations = 0
 
     def at(self, theta) -> object:
@@ -258,7 +282,7 @@ class ModelLoss:
         args = (stepper, self.x, self.u, self.x_next)
         kw = dict(names=self.names, weights=self.weights)
         if self.kind == "explicit":
-            return explicit_loss(*args, **kw)
+            return explicit_loss(*args, **kw, gradient=self.gradient)
         if self.kind == "naive_implicit":
-            return naive_implicit_loss(*args, **kw)
+            return naive_implicit_loss(*args, **kw, gradient=self.gradient)
         return violation_implicit_loss(*args, self.eps, **kw)

@@ -22,8 +22,12 @@ For fixed ``phi``, ``J`` is convex in ``lam``: a convex quadratic plus, per impu
 ``1/2 neg(lam_i)^2 + pos(phi_i) pos(lam_i)`` (``pos(phi_i) >= 0``). It is minimised here by
 exact coordinate descent (each coordinate's one-dimensional minimiser is closed-form: the
 negative branch, the positive branch, or 0), which converges for such separable nonsmooth
-convex terms, to ``tol`` in the change of J's subgradient optimality, then the loss and its
-gradient are evaluated at the minimiser. By the envelope theorem the gradient of the loss in
+convex terms, to ``tol`` in J's optimality conditions, helped by exact solves on the current
+sign pattern; the data points still short of their minimum after ``LCP_AFTER_SWEEPS`` sweeps
+are solved as a monotone LCP (by drake-abs's own interior point, at mu = 0), then exactly on
+that answer's sign pattern. The loss
+and its gradient are evaluated at the minimiser, and every minimiser is checked against the
+optimality conditions (``converged``). By the envelope theorem the gradient of the loss in
 theta is the partial derivative of ``J`` at the minimiser (``lam`` held), whatever the
 minimiser's own derivative: ::
 
@@ -35,9 +39,17 @@ Shapes: batch B, outputs ny, impulses nl, parameters T.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from drake_abs.lcp.ipm import solve_lcp
+
+#: after this many coordinate-descent sweeps, the data points not yet at their minimum are
+#: solved as an LCP (:func:`_solve_as_lcp`): coordinate descent crawls where impulses act along
+#: dependent directions (several generators of one friction cone, more impulses than outputs)
+LCP_AFTER_SWEEPS = 40
 
 
 @dataclass(frozen=True)
@@ -129,22 +141,27 @@ def violation_loss(
     scale = scale + p.max(axis=1, initial=0.0)
     converged = np.zeros(B, dtype=bool)
     sweeps = 0
+    todo = np.arange(B)  # the data points still sweeping (the converged ones are left alone)
     while sweeps < max_sweeps:
         sweeps += 1
+        Dt, rt, lt, ct, pt = D[todo], r[todo], lam[todo], col[todo], p[todo]
         for i in range(nl):
-            Di = D[:, :, i]
+            Di = Dt[:, :, i]
             # J along coordinate i: ||r + D_i lam_i - D_i t||^2 + branch terms in t
-            c = np.einsum("bj,bj->b", Di, r) + col[:, i] * lam[:, i]
+            c = np.einsum("bj,bj->b", Di, rt) + ct[:, i] * lt[:, i]
             with np.errstate(divide="ignore", invalid="ignore"):
-                t_pos = np.where(col[:, i] > 0, (c - 0.5 * p[:, i]) / col[:, i], 0.0)
-                t_neg = c / (col[:, i] + 0.5 * w)
+                t_pos = np.where(ct[:, i] > 0, (c - 0.5 * pt[:, i]) / ct[:, i], 0.0)
+                t_neg = c / (ct[:, i] + 0.5 * w)
             t = np.where(t_pos > 0, t_pos, np.where(t_neg < 0, t_neg, 0.0))
-            r -= Di * (t - lam[:, i])[:, None]
-            lam[:, i] = t
-        converged = _optimality(D, r, lam, p, w) <= tol * scale
+            rt -= Di * (t - lt[:, i])[:, None]
+            lt[:, i] = t
+        r[todo], lam[todo] = rt, lt
+        converged[todo] = _optimality(Dt, rt, lt, pt, w) <= tol * scale[todo]
         if converged.all():
             break
-        if nl > 1:  # the sign pattern is usually right long before the values: solve on it
+        # the sign pattern is usually right long before the values: solve on it (every few
+        # sweeps: a pattern that is not yet right fails, and each attempt costs a solve)
+        if nl > 1 and (sweeps <= 4 or sweeps % 8 == 0):
             for b in np.flatnonzero(~converged):
                 # on the sign pattern with the negligible impulses dropped (coordinate descent
                 # leaves a zero impulse at a tiny value, whose sign is noise), else as it is
@@ -162,9 +179,29 @@ def violation_loss(
                     ):
                         lam[b], r[b] = polished, r_b
                         break
-            converged = _optimality(D, r, lam, p, w) <= tol * scale
+            todo = np.flatnonzero(~converged)
+            converged[todo] = (
+                _optimality(D[todo], r[todo], lam[todo], p[todo], w) <= tol * scale[todo]
+            )
             if converged.all():
                 break
+        todo = np.flatnonzero(~converged)
+        if sweeps == LCP_AFTER_SWEEPS and todo.size:  # slow ones: the exact LCP (docstring)
+            solved = _solve_as_lcp(D[todo], r0[todo], p[todo], w)
+            if solved is not None:  # to machine precision on the LCP answer's sign pattern
+                for k, b in enumerate(todo):
+                    big = np.abs(solved[k]) > 1e-9 * np.abs(solved[k]).max()
+                    polished = _solve_on_pattern(D[b], r0[b], np.where(big, solved[k], 0.0),
+                                                 p[b], w)  # fmt: skip
+                    if polished is not None:
+                        solved[k] = polished
+                r_s = r0[todo] - np.einsum("bji,bi->bj", D[todo], solved)
+                ok = _optimality(D[todo], r_s, solved, p[todo], w) <= tol * scale[todo]
+                rows = todo[ok]
+                lam[rows], r[rows], converged[rows] = solved[ok], r_s[ok], True
+                todo = np.flatnonzero(~converged)
+                if not todo.size:
+                    break
     prediction = np.einsum("bj,bj->b", r, r)
     violation = complementarity_violation(phi, lam)
     loss = prediction + violation / eps
@@ -192,6 +229,27 @@ def _optimality(D, r, lam, p, w) -> np.ndarray:
     res = np.where(lam > 0, np.abs(g + p), np.where(lam < 0, np.abs(g + w * lam),
                                                      np.maximum(g, 0.0) + pos(-p - g)))  # fmt: skip
     return res.max(axis=1)
+
+
+def _solve_as_lcp(D, r0, p, w) -> np.ndarray | None:
+    """The minimisers (B, nl) of a batch as one LCP each: with ``lam = a - b``, ``a, b >= 0``,
+    J is the convex quadratic ``||r0 - D a + D b||^2 + (w / 2) ||b||^2 + p . a`` (at a
+    minimiser a and b are never both positive: lowering both lowers J), whose optimality
+    conditions are the monotone LCP ``z = (a, b) >= 0 _|_ H z + f >= 0`` with
+    ``H = 2 A^T A + diag(0, w I)``, ``A = [D, -D]``, ``f = (-2 D^T r0 + p, 2 D^T r0)``. Solved
+    exactly (mu = 0) by :func:`drake_abs.lcp.solve_lcp`; None if it fails."""
+    B, _, nl = D.shape
+    A = np.concatenate([D, -D], axis=2)
+    H = 2.0 * np.einsum("bji,bjk->bik", A, A)
+    H[:, nl:, nl:] += w * np.eye(nl)
+    Dr = np.einsum("bji,bj->bi", D, r0)
+    f = np.concatenate([-2.0 * Dr + p, 2.0 * Dr], axis=1)
+    with warnings.catch_warnings():  # a failed solve is reported by the caller's check
+        warnings.simplefilter("ignore")
+        res = solve_lcp(H, f, 0.0, on_bad_matrix="attempt")
+    if not np.all(np.isfinite(res.lam)):
+        return None
+    return res.lam[:, :nl] - res.lam[:, nl:]
 
 
 def _solve_on_pattern(D, r0, lam, p, w) -> np.ndarray | None:

@@ -14,7 +14,7 @@ import copy
 import difflib
 import functools
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -411,11 +411,13 @@ class ComplementarityStepper:
         u: np.ndarray,
         *,
         jacobians: bool = True,
-        parameters: bool = False,
+        parameters: bool | Sequence[str] = False,
         smoothing_parameters: bool = False,
     ) -> Step:
         """Step a batch: x (B, nq + nv), u (B, nu) or (nu,) shared. With ``parameters`` (and
-        ``jacobians``), also the derivatives with respect to :attr:`parameter_names`.
+        ``jacobians``), also the derivatives with respect to :attr:`parameter_names`, or to the
+        names given (a sequence of some of them: only those columns are computed, in that
+        order).
 
         Returns:
             a :class:`~drake_abs.contact.step.Step` over the nc contact candidates: ``impulse``
@@ -425,7 +427,7 @@ class ComplementarityStepper:
         if (parameters or smoothing_parameters) and not jacobians:
             raise ValueError("parameters=True and smoothing_parameters=True need jacobians=True")
         # the theta columns: the model's parameters, then the smoothing policy's
-        names = (self.parameter_names if parameters else ()) + (
+        names = self._theta_names(parameters) + (
             self.smoothing_parameter_names if smoothing_parameters else ()
         )
         nq, nv, nu, nc = self.sizes
@@ -495,14 +497,32 @@ class ComplementarityStepper:
             )
         return Step(active=active[:, :nc], theta_names=names, **out)
 
+    def _theta_names(self, parameters) -> tuple[str, ...]:
+        """The theta columns of ``parameters``: True (all), False (none) or some names."""
+        if isinstance(parameters, (bool, np.bool_)):
+            return self.parameter_names if parameters else ()
+        if isinstance(parameters, str):
+            raise ValueError(f"parameters must be True, False or a sequence of names; got the "
+                             f"string {parameters!r}")  # fmt: skip
+        names = tuple(parameters)
+        known = set(self.parameter_names)
+        unknown = [n for n in names if n not in known]
+        if unknown or len(set(names)) != len(names):
+            raise ValueError(
+                f"parameters must be distinct names among parameter_names; got {list(names)} "
+                f"(unknown: {unknown})"
+            )
+        return names
+
     def contact_problem(
-        self, x: np.ndarray, u: np.ndarray, *, parameters: bool = True
+        self, x: np.ndarray, u: np.ndarray, *, parameters: bool | Sequence[str] = True
     ) -> ContactProblem:
         """The dynamics one step's LCP is built from, at states x (B, nq + nv) and inputs
         u (B, nu) or (nu,), with every contact candidate and joint-limit row included (no
         pruning) and the inputs clipped to the effort limits as :meth:`step` does: the inverse
         mass matrix and free velocity of the (damped) step, the distances and rows, the
-        friction cone; with ``parameters``, their derivatives in :attr:`parameter_names`.
+        friction cone; with ``parameters`` (True, or some names), their derivatives in
+        :attr:`parameter_names` (or those names).
 
         This is what a loss that does not solve the step needs (the violation-implicit loss of
         :mod:`drake_abs.learning.scene_losses`): the step itself is ``contact_step`` of these
@@ -528,8 +548,8 @@ class ComplementarityStepper:
         lidx = np.arange(self.limits.size)
         quant = self.model.quantities(q, v, u, idx, derivatives=False, damping=self._damping)
         cone = self._cone(idx, lidx.size)
-        names = self.parameter_names if parameters else ()
-        par = self._parameter_derivatives(idx, cone, q, v, u, names) if parameters else None
+        names = self._theta_names(parameters)
+        par = self._parameter_derivatives(idx, cone, q, v, u, names) if names else None
         quant, par = self._joint_rows(quant, par, q, lidx, False, names)
         return ContactProblem(quant, cone, float(self.model.h), par, names, nc)
 
