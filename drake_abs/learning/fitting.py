@@ -61,8 +61,10 @@ def _setup(theta0, scale, lower, upper):
         raise ValueError(f"scale must be > 0 and finite, one per parameter ({P}); got {scale}")
     lo = np.full(P, -np.inf) if lower is None else np.broadcast_to(np.asarray(lower, float), (P,))
     hi = np.full(P, np.inf) if upper is None else np.broadcast_to(np.asarray(upper, float), (P,))
-    if np.any(lo > hi) or np.any(theta0 < lo) or np.any(theta0 > hi):
+    slack = 1e-9 * (1.0 + np.abs(theta0))  # a bound reached by a previous fit, to rounding
+    if np.any(lo > hi) or np.any(theta0 < lo - slack) or np.any(theta0 > hi + slack):
         raise ValueError(f"need lower <= theta0 <= upper; got {lo}, {theta0}, {hi}")
+    theta0 = np.clip(theta0, lo, hi)
     return theta0, scale, lo, hi
 
 
@@ -154,7 +156,7 @@ def fit_gradient(
 
     def fun(z):
         nonlocal evals, unconverged
-        theta = theta0 + scale * z
+        theta = np.clip(theta0 + scale * z, lo, hi)  # L-BFGS-B keeps z in bounds, to rounding
         r = loss(theta)
         evals += 1
         unconverged += not r.all_converged
