@@ -6,8 +6,8 @@ them and its prediction errors measured.
 
 Sources (every one seeded: the same arguments give identical arrays):
 
-- :func:`sap_transitions`: the scene's Drake twin (:func:`drake_abs.diagrams.drake_twin.
-  make_drake_twin`: the same model files in a discrete MultibodyPlant at the scene's time step,
+- :func:`sap_transitions`: the scene's Drake twin (``make_drake_twin`` of
+  ``diagrams/drake_twin.py``: the same model files in a discrete MultibodyPlant at the scene's time step,
   compliant point contact through a collision sphere at each declared contact point; a point
   contact of radius 0 becomes a 1 mm sphere, whose surface lies 1 mm below the point). Its
   state is checked to be ours entry by entry (the same position and velocity names in the same
@@ -59,7 +59,8 @@ SCENES = ("box_push", "gym_hopper", "gym_half_cheetah")
 MUJOCO_ENVS = {"gym_hopper": "Hopper-v5", "gym_half_cheetah": "HalfCheetah-v5"}
 #: The box's MuJoCo model (the SDF's box, the scene's contact points).
 BOX_MJCF = "models/box_planar.xml"
-#: Box initial-state noise: position offset (m), tilt (rad), lift (m), velocity (m/s, m/s, rad/s).
+#: The box's initial-state noise, as half-widths of the position offset (m), the tilt (rad),
+#: the lift (m) and the velocity (m/s, m/s, rad/s).
 BOX_NOISE = {"x": 0.1, "pitch": 0.1, "lift": 0.02, "v": (0.5, 0.2, 1.0)}
 BOX_HALF = (0.2, 0.1)  # half length and half height (m), the contact points' offsets
 
@@ -130,7 +131,7 @@ def initial_state(scene_name: str, ep_seed: int, base=None, noise: bool = True) 
 @dataclass
 class RandomPolicy:
     """u uniform in [low, high] (nu,), a new sample each step; seeded (``seed``, and the episode
-    seed given to :meth:`reset`)."""
+    seed given to ``reset``)."""
 
     nu: int
     low: np.ndarray
@@ -606,7 +607,7 @@ def prediction_errors(data: Transitions, scene_name: str, stepper=None) -> dict:
     """Our model's one-step prediction errors on ``data``: ``stepper`` (default our scene's
     exact stepper) from each recorded (x, u), one state per call, compared with the recorded
     x_next (:func:`~drake_abs.learning.transitions.error_summary`: the mean and max of the
-    largest |error| in q and in v, per part: ``all``; ``free`` and ``contact`` by the source's
+    largest absolute error in q and in v, per part: ``all``; ``free`` and ``contact`` by the source's
     contact flag; ``smooth``: free, our contact points clear of the ground (:data:`CLEARANCE`)
     and no joint near a limit (:data:`NEAR_LIMIT`), where both models step the same smooth
     dynamics), plus ``unconverged`` (steps whose contact solve did not converge), ``seconds``
