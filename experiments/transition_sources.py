@@ -7,11 +7,11 @@ them and its prediction errors measured.
 Sources (every one seeded: the same arguments give identical arrays):
 
 - :func:`sap_transitions`: the scene's Drake twin (``make_drake_twin`` of
-  ``diagrams/drake_twin.py``: the same model files in a discrete MultibodyPlant at the scene's time step,
-  compliant point contact through a collision sphere at each declared contact point; a point
-  contact of radius 0 becomes a 1 mm sphere, whose surface lies 1 mm below the point). Its
-  state is checked to be ours entry by entry (the same position and velocity names in the same
-  order, :func:`check_drake_coordinates`). One step = Drake's discrete update of the diagram.
+  ``diagrams/drake_twin.py``: the same model files in a discrete MultibodyPlant at the scene's time
+  step, compliant point contact through a collision sphere at each declared contact point; a point
+  contact of radius 0 becomes a 1 mm sphere, whose surface lies 1 mm below the point). Its state is
+  checked to be ours entry by entry (the same position and velocity names in the same order,
+  :func:`check_drake_coordinates`). One step = Drake's discrete update of the diagram.
 - :func:`mujoco_transitions`: ``gym_hopper`` and ``gym_half_cheetah`` in gymnasium's
   ``Hopper-v5`` / ``HalfCheetah-v5`` (as published: soft contact on the capsules, the Hopper RK4
   at 2 ms, the HalfCheetah Euler at 10 ms with its joint springs, which our scene drops), with
@@ -607,12 +607,12 @@ def prediction_errors(data: Transitions, scene_name: str, stepper=None) -> dict:
     """Our model's one-step prediction errors on ``data``: ``stepper`` (default our scene's
     exact stepper) from each recorded (x, u), one state per call, compared with the recorded
     x_next (:func:`~drake_abs.learning.transitions.error_summary`: the mean and max of the
-    largest absolute error in q and in v, per part: ``all``; ``free`` and ``contact`` by the source's
-    contact flag; ``smooth``: free, our contact points clear of the ground (:data:`CLEARANCE`)
-    and no joint near a limit (:data:`NEAR_LIMIT`), where both models step the same smooth
-    dynamics), plus ``unconverged`` (steps whose contact solve did not converge), ``seconds``
-    and per transition the errors ``q_err``, ``v_err`` and the masks ``near_limit``,
-    ``clear`` (arrays, N)."""
+    largest absolute error in q and in v, per part: ``all``; ``free`` and ``contact`` by the
+    source's contact flag; ``smooth``: free, our contact points clear of the ground
+    (:data:`CLEARANCE`) and no joint near a limit (:data:`NEAR_LIMIT`), where both models step
+    the same smooth dynamics), plus ``unconverged`` (steps whose contact solve did not
+    converge), ``seconds`` and per transition the errors ``q_err``, ``v_err`` and the masks
+    ``near_limit``, ``clear`` (arrays, N)."""
     stepper = exact_stepper(scene_name) if stepper is None else stepper
     start = time.perf_counter()
     x_pred, converged = one_step_predictions(stepper, data)

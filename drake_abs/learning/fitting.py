@@ -7,7 +7,8 @@ parameter's typical size (e.g. 0.01 m for a ground height, 0.1 for a friction co
 10 % of a mass), so that one step size suits parameters of different units.
 
 A loss is any callable ``theta -> LossValue``
-(:class:`~drake_abs.learning.scene_losses.ModelLoss` is one); random search reads only its ``loss``, gradient descent also its ``grad``.
+(:class:`~drake_abs.learning.scene_losses.ModelLoss` is one); random search reads only its
+``loss``, gradient descent also its ``grad``.
 Evaluations whose value is not fully converged (``all_converged`` False) are counted in the
 result's history; they are not hidden.
 """
