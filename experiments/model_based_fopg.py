@@ -38,6 +38,7 @@ import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware
 from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.learning.scene_losses import learned_values, stepper_at
 
 NAME = "model-based-fopg"
 ARMS = ("learned", "file", "start")
@@ -111,11 +112,11 @@ class NoisyPolicy:
         return np.clip(self.gears * a, -self.effort, self.effort)
 
 
-def with_model(task, values: dict):
-    """The locomotion task with its stepper's model parameters set to ``values``."""
+def with_model(task, names, theta):
+    """The locomotion task with its stepper's learned parameters ``names`` set to ``theta``."""
     from drake_abs.tasks.adapters import ActionScaled
 
-    inner = task.stepper.stepper.with_parameters(values)
+    inner = stepper_at(task.stepper.stepper, names, theta)
     return replace(task, stepper=ActionScaled(inner, task.stepper.scale))
 
 
@@ -155,7 +156,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     true_task = locomotion_task(config.task)  # exact contact, the file's parameters
     model = base.stepper.stepper
     names = ml.learned_names(model)
-    truth = ml._values(model, names)
+    truth = learned_values(model, names)
     rng = np.random.default_rng(config.seed)
     learning = ml.Config(ground_offset=config.ground_offset, perturbation=config.perturbation,
                          eps=config.eps, gradient_iterations=config.fit_iterations,
@@ -163,17 +164,6 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                          search_directions=config.search_directions,
                          max_transitions=config.max_transitions, seed=config.seed)  # fmt: skip
     theta_start, scale, lo, hi = ml.start_and_scale(names, truth, learning, rng)
-
-    def values_of(theta) -> dict:
-        from drake_abs.learning.scene_losses import ModelLoss
-
-        x1 = np.zeros((1, base.nx))
-        return_loss = ModelLoss(model, x1, np.zeros((1, base.nu)), x1, names)
-        return {
-            model.parameter_names[c]: float(v)
-            for cols, v in zip(return_loss.groups, theta, strict=True)
-            for c in cols
-        }
 
     frame = same_period_frame_skip(env_id, base.dt)
     env = make_gymnasium(env_id, config.eval_steps, frame["frame_skip"])
@@ -196,7 +186,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                                  config.initial_episodes, config.steps, config.seed)  # fmt: skip
     loc = _locomotion_config(config)
     x_eval = base.initial_states(np.random.default_rng([config.seed, 2]), 1)
-    tasks = {"file": base, "start": with_model(base, values_of(theta_start))}
+    tasks = {"file": base, "start": with_model(base, names, theta_start)}
     theta_pi = {arm: np.zeros(inner.n_params) for arm in ARMS}
     theta_model = theta_start.copy()
     rows, fits = [], []
@@ -212,7 +202,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         fits.append({"round": k, "theta": theta_model.tolist(), "loss": result.loss,
                      "seconds": time.perf_counter() - t0,
                      "unconverged_evaluations": result.unconverged_evaluations})  # fmt: skip
-        tasks["learned"] = with_model(base, values_of(theta_model))
+        tasks["learned"] = with_model(base, names, theta_model)
         # (2) the policy update in each arm's model
         seconds = {}
         for arm in ARMS:

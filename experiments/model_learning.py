@@ -51,7 +51,7 @@ import numpy as np
 from drake_abs.contact.smoothing import ContactAware, Exact
 from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.learning.fitting import fit_gradient, fit_random_search
-from drake_abs.learning.scene_losses import ModelLoss
+from drake_abs.learning.scene_losses import ModelLoss, learned_values, stepper_at
 
 NAME = "model-learning"
 SCENES = ("box_push", "gym_hopper", "gym_half_cheetah")
@@ -127,20 +127,6 @@ def learned_names(stepper) -> list[str]:
     values = stepper.parameter_values()
     out += [n for n, v in zip(names, values, strict=True) if n.startswith("damping[") and v > 0]
     return out
-
-
-def _values(stepper, names) -> np.ndarray:
-    """The stepper's values of the learned parameters (a tied pattern: its first column)."""
-    loss_names = stepper.parameter_names
-    values = stepper.parameter_values()
-    out = []
-    for name in names:
-        if "*" in name:
-            prefix = name.split("*")[0]
-            out.append(values[next(i for i, n in enumerate(loss_names) if n.startswith(prefix))])
-        else:
-            out.append(values[loss_names.index(name)])
-    return np.array(out, dtype=float)
 
 
 def start_and_scale(names, truth: np.ndarray, config: Config, rng: np.random.Generator):
@@ -280,11 +266,10 @@ def run_case(scene: str, source: str, config: Config) -> dict:
     parts = collect(scene, source, config)
     everything = parts[0].concatenate(*parts[1:])
     names = learned_names(stepper)
-    truth = _values(stepper, names)
+    truth = learned_values(stepper, names)
     rng = np.random.default_rng(config.seed)
     start, scale, lo, hi = start_and_scale(names, truth, config, rng)
-    x1, u1 = everything.x[:1], everything.u[:1]
-    start_stepper = ModelLoss(stepper, x1, u1, x1, names).at(start)
+    start_stepper = stepper_at(stepper, names, start)
     spread = np.maximum(everything.x.std(axis=0), 1e-3)
     out = {"scene": scene, "source": source, "names": names, "file": truth.tolist(),
            "start": start.tolist(), "transitions": len(everything), "sizes": []}  # fmt: skip
@@ -299,7 +284,7 @@ def run_case(scene: str, source: str, config: Config) -> dict:
             t0 = time.perf_counter()
             result = fit(stepper, tr, fit_name, names, start, scale, lo, hi, config,
                          config.seed + 7 * k + n_train)  # fmt: skip
-            learned = ModelLoss(stepper, *[a[:1] for a in tr], names).at(result.theta)
+            learned = stepper_at(stepper, names, result.theta)
             row["fits"][fit_name] = {
                 "theta": result.theta.tolist(), "loss": result.loss,
                 "start_loss": result.start_loss,
@@ -371,7 +356,8 @@ def _write_errors(path: Path, cases: list[dict]) -> Path:
     return path
 
 
-def _plot_errors(path: Path, cases: list[dict]) -> Path:
+def _panels(path: Path, cases: list[dict], ylabel: str, draw) -> Path:
+    """One log-scale panel per case side by side, ``draw(ax, case)`` filling each, saved."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -379,15 +365,9 @@ def _plot_errors(path: Path, cases: list[dict]) -> Path:
 
     fig, axes = plt.subplots(1, len(cases), figsize=(4 * len(cases), 3.4), squeeze=False)
     for ax, c in zip(axes[0], cases, strict=True):
-        row = c["sizes"][-1]
-        for model, errs in row["errors"].items():
-            ax.plot(np.arange(1, len(errs) + 1), errs, label=model,
-                    ls="--" if model in ("file", "start") else "-")  # fmt: skip
+        draw(ax, c)
         ax.set_yscale("log")
-        ax.set_title(f"{c['scene']} / {c['source']}\n{row['train_episodes']} training episodes",
-                     fontsize=9)  # fmt: skip
-        ax.set_xlabel("horizon (steps)")
-    axes[0][0].set_ylabel("state prediction error (data std)")
+    axes[0][0].set_ylabel(ylabel)
     axes[0][-1].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -395,28 +375,34 @@ def _plot_errors(path: Path, cases: list[dict]) -> Path:
     return path
 
 
+def _plot_errors(path: Path, cases: list[dict]) -> Path:
+    """Prediction error against the horizon, the largest training set."""
+
+    def draw(ax, c):
+        row = c["sizes"][-1]
+        for model, errs in row["errors"].items():
+            ax.plot(np.arange(1, len(errs) + 1), errs, label=model,
+                    ls="--" if model in ("file", "start") else "-")  # fmt: skip
+        ax.set_title(f"{c['scene']} / {c['source']}\n{row['train_episodes']} training episodes",
+                     fontsize=9)  # fmt: skip
+        ax.set_xlabel("horizon (steps)")
+
+    return _panels(path, cases, "state prediction error (data std)", draw)
+
+
 def _plot_sizes(path: Path, cases: list[dict]) -> Path:
-    import matplotlib
+    """Mean prediction error over the horizon against the training set's size."""
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(cases), figsize=(4 * len(cases), 3.4), squeeze=False)
-    for ax, c in zip(axes[0], cases, strict=True):
+    def draw(ax, c):
         sizes = [row["train_transitions"] for row in c["sizes"]]
         for model in _models(c["sizes"][0]):
             ax.plot(sizes, [np.nanmean(row["errors"][model]) for row in c["sizes"]], "o-",
                     label=model)  # fmt: skip
         ax.set_xscale("log")
-        ax.set_yscale("log")
         ax.set_title(f"{c['scene']} / {c['source']}", fontsize=9)
         ax.set_xlabel("training transitions")
-    axes[0][0].set_ylabel("mean prediction error over the horizon")
-    axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+
+    return _panels(path, cases, "mean prediction error over the horizon", draw)
 
 
 def report(summary: dict) -> str:

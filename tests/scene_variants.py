@@ -7,8 +7,29 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from drake_abs.multibody import Scene
 from drake_abs.multibody.builder import resolve_model_file
+
+
+def contact_state(name: str, model) -> tuple[np.ndarray, np.ndarray]:
+    """A state in contact and an input, per scene (none at a contact-mode switch): the states
+    the model-parameter derivatives are checked at."""
+    cm = model.contact_model
+    x = model.x0.copy()
+    if name == "box_push":  # on its two bottom corners, sliding at 1 m/s, pushed
+        return x, np.full(cm.nu, 3.0)
+    if name == "hopper":  # pitched, hip bent, foot landing within the step: the foot sticks
+        x[2], x[3], x[cm.nq + 1] = 0.2, -0.3, -6.0
+        return x, np.array([4.0, -3.0])
+    if name == "gym_hopper":  # falling onto its foot, legs moving, torques applied
+        x[cm.nq : cm.nq + 2] = [1.0, -4.0]
+        x[cm.nq + 3 :] = [1.0, -2.0, 3.0]
+        return x, np.array([30.0, -50.0, 20.0])
+    # ball_throw: just above the ground, moving down and sideways (sliding)
+    x[6], x[10], x[11], x[12] = 0.0505, 3.0, 1.0, -0.6
+    return x, np.zeros(cm.nu)
 
 
 def with_mass(scene: Scene, body: str, factor: float, folder: Path) -> Scene:

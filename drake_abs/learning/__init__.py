@@ -19,7 +19,9 @@ from drake_abs.learning.scene_losses import (
     LossValue,
     ModelLoss,
     explicit_loss,
+    learned_values,
     naive_implicit_loss,
+    stepper_at,
     violation_implicit_loss,
 )
 from drake_abs.learning.transitions import Transitions
@@ -28,5 +30,6 @@ from drake_abs.learning.violation import ViolationLoss, complementarity_violatio
 __all__ = [
     "FitResult", "GroundToy", "LossValue", "ModelLoss", "Transitions", "ViolationLoss",
     "complementarity_violation", "explicit_loss", "fit_gradient", "fit_random_search",
-    "naive_implicit_loss", "violation_implicit_loss", "violation_loss",
+    "learned_values", "naive_implicit_loss", "stepper_at", "violation_implicit_loss",
+    "violation_loss",
 ]  # fmt: skip

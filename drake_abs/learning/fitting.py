@@ -87,8 +87,10 @@ def fit_random_search(
     iteration, ``directions`` Gaussian directions delta in scaled coordinates, the loss at
     ``z +- noise delta``, and ``z <- z - step_size / (top sigma) sum_top (L+ - L-) delta`` over
     the ``top`` directions with the smallest ``min(L+, L-)`` (sigma: the standard deviation of
-    those 2 top losses). Parameters are clipped to ``[lower, upper]``. Seeded; returns the best
-    parameters evaluated. Uses ``1 + iterations (2 directions + 1)`` evaluations."""
+    those 2 top losses). A direction with a non-finite loss (a failed evaluation) is left out;
+    an iteration with none usable makes no step. Parameters are clipped to ``[lower, upper]``.
+    Seeded; returns the best parameters evaluated. Uses ``1 + iterations (2 directions + 1)``
+    evaluations."""
     theta0, scale, lo, hi = _setup(theta0, scale, lower, upper)
     if iterations < 1 or directions < 1:
         raise ValueError(f"iterations and directions must be >= 1; got {iterations}, {directions}")
@@ -116,13 +118,14 @@ def fit_random_search(
         delta = rng.standard_normal((directions, theta0.size))
         plus = np.array([value(z + noise * d)[0] for d in delta])
         minus = np.array([value(z - noise * d)[0] for d in delta])
-        keep = np.argsort(np.minimum(plus, minus))[:top]
-        both = np.concatenate([plus[keep], minus[keep]])
-        finite = np.isfinite(both)
-        sigma = both[finite].std() if finite.sum() > 1 else 0.0
-        diff = np.nan_to_num(plus[keep] - minus[keep], nan=0.0, posinf=1e300, neginf=-1e300)
+        # the directions whose two losses are finite (an evaluation that failed carries no
+        # usable difference), the top ones of them by their better loss
+        usable = np.flatnonzero(np.isfinite(plus) & np.isfinite(minus))
+        keep = usable[np.argsort(np.minimum(plus, minus)[usable])][:top]
+        sigma = np.concatenate([plus[keep], minus[keep]]).std() if keep.size else 0.0
         if sigma > 0:
-            z = z - step_size / (top * sigma) * (diff @ delta[keep])
+            diff = plus[keep] - minus[keep]
+            z = z - step_size / (keep.size * sigma) * (diff @ delta[keep])
         z = (np.clip(theta0 + scale * z, lo, hi) - theta0) / scale
         current, theta = value(z)
         if current < best:

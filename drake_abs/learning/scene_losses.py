@@ -121,6 +121,28 @@ def _columns(all_names: Sequence[str], names: Sequence[str] | None) -> tuple[lis
     return groups, tuple(str(n) for n in names)
 
 
+def learned_values(stepper, names: Sequence[str]) -> np.ndarray:
+    """The stepper's current values (len(names),) of the learned parameters ``names`` (names
+    of ``stepper.parameter_names`` or ``*`` patterns; a pattern's value is its first matching
+    column's)."""
+    groups, _ = _columns(stepper.parameter_names, names)
+    values = stepper.parameter_values()
+    return np.array([values[cols[0]] for cols in groups], dtype=float)
+
+
+def stepper_at(stepper, names: Sequence[str], theta) -> object:
+    """The stepper with the learned parameters ``names`` set to ``theta`` (len(names),): every
+    column a pattern matches takes its value (``stepper.with_parameters``)."""
+    groups, names = _columns(stepper.parameter_names, names)
+    theta = np.asarray(theta, dtype=float)
+    if theta.shape != (len(names),):
+        raise ValueError(f"theta must have shape ({len(names)},) for {names}; got {theta.shape}")
+    all_names = stepper.parameter_names
+    return stepper.with_parameters(
+        {all_names[c]: value for cols, value in zip(groups, theta, strict=True) for c in cols}
+    )
+
+
 def _grouped(d: np.ndarray, groups: list) -> np.ndarray:
     """Columns (last axis) summed per group: the derivative in a tied parameter."""
     return np.stack([d[..., cols].sum(axis=-1) for cols in groups], axis=-1)
@@ -267,14 +289,7 @@ class ModelLoss:
 
     def at(self, theta) -> object:
         """The stepper with the parameters ``names`` set to theta."""
-        theta = np.asarray(theta, dtype=float)
-        if theta.shape != (len(self.names),):
-            raise ValueError(f"theta must have shape ({len(self.names)},) for {self.names}; "
-                             f"got {theta.shape}")  # fmt: skip
-        names = self.stepper.parameter_names
-        return self.stepper.with_parameters(
-            {names[c]: value for cols, value in zip(self.groups, theta, strict=True) for c in cols}
-        )
+        return stepper_at(self.stepper, self.names, theta)
 
     def __call__(self, theta) -> LossValue:
         stepper = self.at(theta)

@@ -75,7 +75,8 @@ def _pose(plant, ctx, body):
 #: the entries of a unit inertia in the order of its parameters (``unit_inertia[body].xx`` ...):
 #: the moments, then the products (entries of the symmetric 3 x 3 matrix, Drake's convention)
 INERTIA_ENTRIES = ("xx", "yy", "zz", "xy", "xz", "yz")
-_ENTRY_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+#: their (row, column) in the 3 x 3 matrix
+INERTIA_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
 def central_unit_inertia(M) -> np.ndarray:
@@ -100,7 +101,7 @@ def spatial_inertia(mass: float, com, unit_inertia) -> SpatialInertia:
 def _full_matrix(entries) -> np.ndarray:
     """The symmetric 3 x 3 matrix of six entries in :data:`INERTIA_ENTRIES` order (any type)."""
     G = np.empty((3, 3), dtype=np.asarray(entries).dtype)
-    for value, (i, j) in zip(entries, _ENTRY_INDEX, strict=True):
+    for value, (i, j) in zip(entries, INERTIA_INDEX, strict=True):
         G[i, j] = G[j, i] = value
     return G
 
@@ -109,7 +110,7 @@ def _unit_inertia(kind, G, scalar):
     """A UnitInertia of type ``kind`` with the entries of the symmetric matrix G (converted to
     ``scalar`` where they are not of that type already)."""
     return kind(*(
-        G[i, j] if isinstance(G[i, j], scalar) else scalar(float(G[i, j])) for i, j in _ENTRY_INDEX
+        G[i, j] if isinstance(G[i, j], scalar) else scalar(float(G[i, j])) for i, j in INERTIA_INDEX
     ))  # fmt: skip
 
 
@@ -338,7 +339,7 @@ class ContactModelBase(ABC):
             G_cm = central_unit_inertia(M)
             G = _full_matrix(np.array([  # about the centre of mass, seeded
                 AutoDiffXd(G_cm[i, j], seeds[nb + 6 * k + e])
-                for e, (i, j) in enumerate(_ENTRY_INDEX)
+                for e, (i, j) in enumerate(INERTIA_INDEX)
             ]))  # fmt: skip
             G_Bo = G + ((c @ c) * np.eye(3) - np.outer(c, c))  # shifted to Bo (c held)
             seeded = SpatialInertia_[AutoDiffXd](

@@ -226,11 +226,12 @@ class PinocchioContactModel(ContactModelBase):
         """Pinocchio's configuration at Drake's q (the same vector without free joints)."""
         return q if self._coords is None else self._coords.at(q).q_pin
 
-    def _read_placements(self, H: np.ndarray, b: int, data=None) -> None:
+    def _read_placements(self, H: np.ndarray, b: int, data) -> None:
         """Copy the placements (4 x 4) of the joints that carry contacts, after the last forward
-        kinematics on ``data`` (default: the model's own data), into ``H[b]`` (nj, 4, 4). The
-        kinematics must have run on that same data (a damped model has data of its own)."""
-        oMi = (self.pin_data if data is None else data).oMi
+        kinematics on ``data``, into ``H[b]`` (nj, 4, 4). ``data`` is named at every call: it
+        must be the data the kinematics ran on (a damped model has data of its own, and reading
+        another's gives a stale state's contacts)."""
+        oMi = data.oMi
         for k, jid in enumerate(self._carriers):
             H[b, k] = oMi[jid].homogeneous
 
@@ -246,7 +247,7 @@ class PinocchioContactModel(ContactModelBase):
         H = np.empty((len(q), len(self._carriers), 4, 4))
         for b, qb in enumerate(q):
             pin.forwardKinematics(model, data, self._pin_q(qb))
-            self._read_placements(H, b)
+            self._read_placements(H, b, data)
         return self._batch_centres(H) @ self.normal - self._radius - self.ground.height
 
     def quantities(
@@ -354,7 +355,7 @@ class PinocchioContactModel(ContactModelBase):
         pin.computeJointJacobians(self.pin_model, self.pin_data, q if maps is None else maps.q_pin)
         # (6, nv) even for nv = 1, where the binding hands back a vector
         H = np.empty((1, len(self._carriers), 4, 4))
-        self._read_placements(H, 0)
+        self._read_placements(H, 0, self.pin_data)
         return self._batch_centres(H)[0], np.array(self.pin_data.J).reshape(6, self.nv), maps
 
     def quantities_within(self, q, v, u, distance, *, derivatives=True, damping=None):

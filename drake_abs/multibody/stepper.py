@@ -32,6 +32,7 @@ from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.multibody.drake_dynamics import (
     INERTIA_ENTRIES,
+    INERTIA_INDEX,
     ContactModelBase,
     central_unit_inertia,
     spatial_inertia,
@@ -251,7 +252,7 @@ class ComplementarityStepper:
         m = self.model
         coeff = m.cone.coefficients
         inertias = [m.body_spatial_inertia(index) for _, index in m._massive]
-        rows, cols = np.array([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]).T
+        rows, cols = np.array(INERTIA_INDEX).T
         points = [m.contacts[i] for i in m.point_contacts]
         return np.concatenate([
             [m.ground.height], coeff[~np.isnan(coeff)], [M.get_mass() for M in inertias],
@@ -431,24 +432,8 @@ class ComplementarityStepper:
             self.smoothing_parameter_names if smoothing_parameters else ()
         )
         nq, nv, nu, nc = self.sizes
-        x = np.asarray(x, dtype=float)
-        if x.ndim == 1:
-            x = x[None]
+        x, u, saturated = self._inputs(x, u)
         B = x.shape[0]
-        u = np.asarray(u, dtype=float)
-        if u.shape != (B, nu):
-            u = np.broadcast_to(u, (B, nu))
-        if x.ndim != 2 or x.shape[1] != nq + nv:
-            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
-        if not (np.isfinite(x).all() and np.isfinite(u).all()):
-            raise ValueError("x and u must be finite")
-        saturated = None
-        if self._clips:  # effort limits: the input applied is clipped
-            saturated = np.abs(u) > self.effort
-            if saturated.any():
-                u = np.clip(u, -self.effort, self.effort)
-            else:
-                saturated = None
         q, v = x[:, :nq], x[:, nq:]
         pruned = np.isfinite(self.activation_distance)
         if self.limits.size:
@@ -497,6 +482,37 @@ class ComplementarityStepper:
             )
         return Step(active=active[:, :nc], theta_names=names, **out)
 
+    def _inputs(self, x, u) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """States x (B, nq + nv) (one state (nq + nv,) becomes a batch of one) and inputs u
+        (B, nu) or (nu,) shared, checked (shapes, finite), with u clipped to the actuators'
+        effort limits as the step applies it; and which entries were clipped (B, nu), or None
+        where none was."""
+        nq, nv, nu, _ = self.sizes
+        x = np.asarray(x, dtype=float)
+        if x.ndim == 1:
+            x = x[None]
+        if x.ndim != 2 or x.shape[1] != nq + nv:
+            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
+        B = x.shape[0]
+        u = np.asarray(u, dtype=float)
+        if u.shape != (B, nu):
+            try:
+                u = np.broadcast_to(u, (B, nu))
+            except ValueError:
+                raise ValueError(
+                    f"u must have shape (B, nu) = ({B}, {nu}) or (nu,); got {u.shape}"
+                ) from None
+        if not (np.isfinite(x).all() and np.isfinite(u).all()):
+            raise ValueError("x and u must be finite")
+        saturated = None
+        if self._clips:  # effort limits: the input applied is clipped
+            saturated = np.abs(u) > self.effort
+            if saturated.any():
+                u = np.clip(u, -self.effort, self.effort)
+            else:
+                saturated = None
+        return x, u, saturated
+
     def _theta_names(self, parameters) -> tuple[str, ...]:
         """The theta columns of ``parameters``: True (all), False (none) or some names."""
         if isinstance(parameters, (bool, np.bool_)):
@@ -528,21 +544,7 @@ class ComplementarityStepper:
         :mod:`drake_abs.learning.scene_losses`): the step itself is ``contact_step`` of these
         quantities."""
         nq, nv, nu, nc = self.sizes
-        x = np.atleast_2d(np.asarray(x, dtype=float))
-        if x.ndim != 2 or x.shape[1] != nq + nv:
-            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
-        B = x.shape[0]
-        u = np.asarray(u, dtype=float)
-        if u.shape != (B, nu):
-            try:
-                u = np.broadcast_to(u, (B, nu))
-            except ValueError:
-                raise ValueError(f"u must have shape (B, nu) = ({B}, {nu}) or (nu,); got "
-                                 f"{u.shape}") from None  # fmt: skip
-        if not (np.isfinite(x).all() and np.isfinite(u).all()):
-            raise ValueError("x and u must be finite")
-        if self._clips:
-            u = np.clip(u, -self.effort, self.effort)
+        x, u, _ = self._inputs(x, u)
         q, v = x[:, :nq], x[:, nq:]
         idx = np.arange(nc)
         lidx = np.arange(self.limits.size)

@@ -174,3 +174,20 @@ def test_fits_lower_the_loss_and_respect_bounds():
         fit_gradient(loss, np.array([0.02, 0.5]), scale, lower=lo, upper=hi)
     with pytest.raises(ValueError, match="gradient=False"):
         ModelLoss(stepper, x, u, x_next, names, "violation_implicit", eps=1e-2, gradient=False)
+
+
+def test_random_search_skips_failed_evaluations():
+    """A loss that fails (is not finite) on part of the space: random search leaves those
+    directions out, never steps on them, and still finds the minimum of the rest."""
+    from types import SimpleNamespace
+
+    from drake_abs.learning import fit_random_search
+
+    def loss(theta):  # a bowl at (1, -1), failing beyond |theta_0| > 2
+        value = np.inf if abs(theta[0]) > 2.0 else float(np.sum((theta - [1.0, -1.0]) ** 2))
+        return SimpleNamespace(loss=value, all_converged=bool(np.isfinite(value)))
+
+    r = fit_random_search(loss, [0.0, 0.0], [1.0, 1.0], iterations=40, directions=4,
+                          noise=1.0, step_size=0.3, seed=0)  # fmt: skip
+    assert np.isfinite(r.loss) and r.loss < 0.05 * r.start_loss
+    assert abs(r.theta[0]) <= 2.0 and r.unconverged_evaluations > 0

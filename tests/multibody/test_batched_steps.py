@@ -56,3 +56,38 @@ def test_a_batch_steps_as_its_states_alone(name, dynamics, activation_distance):
                 getattr(batch, key)[b], getattr(one, key)[0], rtol=1e-9, atol=1e-9,
                 err_msg=f"{key}, state {b}",
             )  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["gym_hopper", "box_push"])
+def test_the_contact_problem_is_the_steps_own(name):
+    """``contact_problem`` hands out the inputs of the step's LCP: solving them with the same
+    smoothing gives the step (the scene's pruning leaves an exact step unchanged)."""
+    from drake_abs.contact.contact_lcp import contact_step
+
+    model = build_scene_model(name)
+    stepper = model.stepper()
+    rng = np.random.default_rng(4)
+    x = _states(model, 6, rng)
+    u = rng.uniform(-1.0, 1.0, (6, model.contact_model.nu)) * 20.0
+    prob = stepper.contact_problem(x, u, parameters=["ground_height"])
+    r = contact_step(prob.quantities, prob.cone, prob.h, stepper.smoothing)
+    step = stepper.step(x, u, parameters=["ground_height"])
+    nq = model.contact_model.nq
+    np.testing.assert_allclose(np.concatenate([r.q_next, r.v_next], axis=1), step.x_next,
+                               rtol=1e-9, atol=1e-9)  # fmt: skip
+    assert prob.theta_names == ("ground_height",) and prob.parameters.dphi.shape[-1] == 1
+    assert step.theta_names == ("ground_height",) and r.q_next.shape[1] == nq
+    # a subset of the columns is those columns of the whole set (the same solve)
+    full = stepper.step(x, u, parameters=True)
+    some = ["ground_height", full.theta_names[-1], full.theta_names[2]]
+    np.testing.assert_allclose(
+        stepper.step(x, u, parameters=some).dx_dtheta,
+        full.dx_dtheta[:, :, [full.theta_names.index(n) for n in some]],
+        rtol=1e-12, atol=1e-12,
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="u must have shape"):
+        stepper.step(x, np.zeros(model.contact_model.nu + 1))
+    with pytest.raises(ValueError, match="u must have shape"):
+        stepper.contact_problem(x, np.zeros((2, model.contact_model.nu)))
+    with pytest.raises(ValueError, match="parameters must be distinct names"):
+        stepper.step(x, u, parameters=["no_such_parameter"])

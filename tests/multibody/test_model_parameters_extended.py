@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scene_variants import with_joint_damping
+from scene_variants import contact_state, with_joint_damping
 
 from drake_abs.contact.smoothing import Exact, Fixed
 from drake_abs.multibody import ComplementarityStepper, Scene, build_scene_model
@@ -47,20 +47,7 @@ STEP_FLOOR = 1e-9
 
 def _states(name: str, model) -> tuple[np.ndarray, np.ndarray]:
     """A state in contact and an input, per scene (none at a contact-mode switch)."""
-    cm = model.contact_model
-    x = model.x0.copy()
-    if name == "box_push":  # on its two bottom corners, sliding at 1 m/s, pushed
-        return x, np.full(cm.nu, 3.0)
-    if name == "hopper":  # pitched, hip bent, foot landing within the step: the foot sticks
-        x[2], x[3], x[cm.nq + 1] = 0.2, -0.3, -6.0
-        return x, np.array([4.0, -3.0])
-    if name == "gym_hopper":  # falling onto its foot, legs moving, torques applied
-        x[cm.nq : cm.nq + 2] = [1.0, -4.0]
-        x[cm.nq + 3 :] = [1.0, -2.0, 3.0]
-        return x, np.array([30.0, -50.0, 20.0])
-    # ball_throw: just above the ground, moving down and sideways, spinning (sliding)
-    x[6], x[10], x[11], x[12] = 0.0505, 3.0, 1.0, -0.6
-    return x, np.zeros(cm.nu)
+    return contact_state(name, model)
 
 
 def _difference(f, value: float, eps: float = EPS) -> np.ndarray:

@@ -10,7 +10,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scene_variants import with_friction, with_inertia, with_joint_damping, with_mass
+from scene_variants import (
+    contact_state,
+    with_friction,
+    with_inertia,
+    with_joint_damping,
+    with_mass,
+)
 
 from drake_abs.contact.smoothing import Exact, Fixed
 from drake_abs.multibody import ComplementarityStepper, Scene, build_scene_model
@@ -28,22 +34,12 @@ def _scene(name: str, dynamics: str) -> Scene:
 
 
 def _states(name: str, model) -> tuple[np.ndarray, np.ndarray]:
-    """A state in contact with an input, per scene (away from contact-mode switches)."""
-    cm = model.contact_model
-    x = model.x0.copy()
-    if name == "box_push":  # on its two bottom corners, sliding at 1 m/s, pushed
-        return x, np.full(cm.nu, 3.0)
-    if name == "hopper":  # pitched, hip bent, the foot landing within the step, torques on
-        x[2], x[3], x[cm.nq + 1] = 0.2, -0.3, -6.0
-        return x, np.array([4.0, -3.0])
-    if name == "gym_hopper":  # falling onto its foot, legs moving, torques applied
-        x[cm.nq : cm.nq + 2] = [1.0, -4.0]
-        x[cm.nq + 3 :] = [1.0, -2.0, 3.0]
-        return x, np.array([30.0, -50.0, 20.0])
-    # ball_throw: just above the ground, moving down and sideways, spinning (sliding)
-    x[6], x[10], x[11], x[12] = 0.0505, 3.0, 1.0, -0.6
-    x[7:10] = [2.0, -1.0, 0.5]
-    return x, np.zeros(cm.nu)
+    """A state in contact with an input, per scene (away from contact-mode switches); the ball
+    also spins, so that its inertia matters."""
+    x, u = contact_state(name, model)
+    if name == "ball_throw":
+        x[7:10] = [2.0, -1.0, 0.5]
+    return x, u
 
 
 def _step(stepper: ComplementarityStepper, x, u):
