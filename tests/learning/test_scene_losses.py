@@ -135,6 +135,12 @@ def test_bad_input_is_named():
     stepper, x, u, x_next = _data("box_push", "anitescu", n=4)
     with pytest.raises(ValueError, match="x_next"):
         explicit_loss(stepper, x, u, x_next[:, :-1])
+    bad = x_next.copy()
+    bad[1, 2] = np.nan
+    with pytest.raises(ValueError, match="x_next must be finite"):
+        violation_implicit_loss(stepper, x, u, bad, 1e-2)
+    with pytest.raises(ValueError, match="x must have shape"):
+        explicit_loss(stepper, x[:, :, None], u, x_next)
     with pytest.raises(ValueError, match="u must"):
         explicit_loss(stepper, x, u[:, :0], x_next)
     with pytest.raises(ValueError, match="eps"):
@@ -191,3 +197,25 @@ def test_random_search_skips_failed_evaluations():
                           noise=1.0, step_size=0.3, seed=0)  # fmt: skip
     assert np.isfinite(r.loss) and r.loss < 0.05 * r.start_loss
     assert abs(r.theta[0]) <= 2.0 and r.unconverged_evaluations > 0
+
+
+@pytest.mark.parametrize("eps", [1e-9, 1e-3, 1e4])
+@pytest.mark.parametrize("name", ["box_push", "hopper"])
+def test_violation_loss_at_extreme_eps_and_fast_impacts(name, eps):
+    """Impacts 40 m/s faster than the data above, eps from nearly hard to nearly free: every
+    inner minimisation converges and the gradient is still the central difference's."""
+    stepper, x, u, _ = _data(name, "anitescu")
+    x = x.copy()
+    x[:, stepper.sizes[0] + 1] -= 40.0
+    step = stepper.step(x, u, jacobians=False)
+    assert step.converged.all()
+    loss = ModelLoss(stepper, x, u, step.x_next + 0.01, ["ground_height", "friction[*]"],
+                     "violation_implicit", eps=eps)  # fmt: skip
+    theta = stepper.parameter_values()[:2]
+    at = loss(theta)
+    assert at.all_converged and np.isfinite(at.loss) and np.isfinite(at.grad).all()
+    for j in range(2):
+        d = np.zeros(2)
+        d[j] = 1e-7
+        fd = (loss(theta + d).loss - loss(theta - d).loss) / 2e-7
+        np.testing.assert_allclose(at.grad[j], fd, rtol=1e-4, atol=1e-6 * (1 + abs(at.loss)))

@@ -198,7 +198,10 @@ def test_parameter_values_round_trip(name):
     partial = stepper.with_parameters({names[first]: 2.0 * values[first], "ground_height": -0.01})
     want = values.copy()
     want[first], want[0] = 2.0 * values[first], -0.01
-    np.testing.assert_array_equal(partial.parameter_values(), want)
+    got = partial.parameter_values()
+    assert got[first] == want[first] and got[0] == want[0]  # stored as given
+    # the body's unit inertia is re-derived (shifted to its origin and back): to rounding
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-17)
 
 
 @pytest.mark.parametrize("dynamics", DYNAMICS)
