@@ -17,8 +17,8 @@ import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.analysis import Simulator, Simulator_
 
-from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.multibody import build_scene_model
+from drake_abs.reference.drake_twin import make_drake_twin
 from drake_abs.systems import ComplementarityPlant
 
 

@@ -124,7 +124,7 @@ def bench_scene(name: str, steps: int, repeats: int, batches: list[int]) -> dict
 def bench_sap(sm, xs, torques, repeats: int) -> dict:
     from pydrake.autodiffutils import InitializeAutoDiff
 
-    from drake_abs.diagrams.drake_twin import make_drake_twin
+    from drake_abs.reference.drake_twin import make_drake_twin
 
     scene = sm.scene
     steps, nx, nu = len(xs), xs.shape[1], torques.shape[1]

@@ -60,7 +60,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_ab
 import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware
-from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
 from drake_abs.engine import rollout
 from drake_abs.lcp.ipm import LCPConvergenceWarning
@@ -68,6 +67,7 @@ from drake_abs.multibody import build_scene_model
 from drake_abs.multibody.scene import Scene
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.reference.drake_twin import make_drake_twin
 from drake_abs.tasks.box_lcs import TranslatingBox
 
 M, H = 256, 200

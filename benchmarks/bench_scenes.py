@@ -30,9 +30,9 @@ from pydrake.autodiffutils import InitializeAutoDiff
 from pydrake.systems.analysis import Simulator
 
 from drake_abs import Exact
-from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
 from drake_abs.multibody.scene import Scene
+from drake_abs.reference.drake_twin import make_drake_twin
 
 
 def _best_time(fn, repeats: int) -> float:

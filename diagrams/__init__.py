@@ -17,5 +17,5 @@ __all__ = [
 ]
 
 # Scene-level builders import heavier modules; import them explicitly:
-#   drake_abs.multibody.builder (build_scene_model), drake_abs.diagrams.drake_twin
+#   drake_abs.multibody.builder (build_scene_model), drake_abs.reference.drake_twin
 #   (make_drake_twin), drake_abs.diagrams.scene_visualization (record_scene, record_rollout_html)

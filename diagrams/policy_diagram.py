@@ -3,7 +3,7 @@ AutoDiffXd.
 
 Any plant of this project (:class:`~drake_abs.systems.LcsPlant`,
 :class:`~drake_abs.systems.ComplementarityPlant`) or a diagram holding a Drake MultibodyPlant
-(e.g. :func:`~drake_abs.diagrams.drake_twin.make_drake_twin`) can be closed in the loop: the
+(e.g. :func:`~drake_abs.reference.drake_twin.make_drake_twin`) can be closed in the loop: the
 builder needs the names of its state output and input ports.
 """
 

@@ -45,3 +45,27 @@ def as_count(value, name: str, *, minimum: int = 0) -> int:
     if isinstance(value, bool) or not integral or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
     return int(value)
+
+
+def batch_of_states(x, u, nx: int, nu: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """States x (B, nx) and inputs u (B, nu) of one batched step, checked: one state (nx,)
+    becomes a batch of one, inputs (nu,) are shared by the batch. Returns (x, u, batched), where
+    ``batched`` is False for one unbatched state. ``ValueError`` names the argument and the
+    expected shape, or says which is not finite."""
+    x = np.asarray(x, dtype=float)
+    batched = x.ndim != 1
+    x = np.atleast_2d(x)
+    if x.ndim != 2 or x.shape[1] != nx:
+        raise ValueError(f"x must have shape (B, nx) = (B, {nx}) or (nx,); got {x.shape}")
+    u = np.asarray(u, dtype=float)
+    try:
+        u = np.broadcast_to(u, (x.shape[0], nu)) if u.shape != (x.shape[0], nu) else u
+    except ValueError:
+        raise ValueError(
+            f"u must have shape (B, nu) = ({x.shape[0]}, {nu}) or (nu,); got {u.shape}"
+        ) from None
+    if not np.isfinite(x).all():
+        raise ValueError("x must be finite")
+    if not np.isfinite(u).all():
+        raise ValueError("u must be finite")
+    return x, u, batched

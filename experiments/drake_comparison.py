@@ -9,7 +9,7 @@ scene's declared contact points, hard contact) under Exact, BS (``Fixed`` mu) an
 
 - **box**: the planar box of ``box_planar.sdf`` (x, z, pitch), resting on the ground, pushed off
   at ``box_speed`` with a constant actuation ``box_push`` (N). Drake's twin
-  (:func:`drake_abs.diagrams.drake_twin.make_drake_twin`) has a 1 mm sphere at each edge where
+  (:func:`drake_abs.reference.drake_twin.make_drake_twin`) has a 1 mm sphere at each edge where
   the scene declares its contact points. Its slide is compared with the analytic Coulomb
   answers: the continuous one ``v0^2 / (2 a)`` and the discrete (semi-implicit Euler) one
   ``h sum_k max(0, v0 - a h k)``, with ``a = mu g - u / m``. Every model first settles at rest
@@ -200,7 +200,7 @@ def build_drake_model(
             f"contact must be 'point' (or 'hydroelastic' for the box); got {contact!r}"
         )
     if contact == "point":  # the generic twin: a collision sphere at each declared contact
-        from drake_abs.diagrams.drake_twin import make_drake_twin
+        from drake_abs.reference.drake_twin import make_drake_twin
 
         twin = make_drake_twin(
             our_scene(scene, time_step, config, "exact"),

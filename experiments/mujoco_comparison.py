@@ -174,7 +174,7 @@ def run_mujoco(model, x0, ctrls):
 def run_sap(scene, x0, torques):
     from pydrake.systems.analysis import Simulator
 
-    from drake_abs.diagrams.drake_twin import make_drake_twin
+    from drake_abs.reference.drake_twin import make_drake_twin
 
     twin = make_drake_twin(scene, "sap")
     sim = Simulator(twin.diagram)

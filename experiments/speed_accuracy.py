@@ -262,7 +262,7 @@ def _drake_model(scene: str, s: Setting, config: Config) -> dc.DrakeModel:
     drake_comparison; an articulated scene as its generic twin, Drake's default material)."""
     if scene in _SPECIAL:
         return dc.build_drake_model(scene, s.family, s.time_step, config.scene_config)
-    from drake_abs.diagrams.drake_twin import make_drake_twin
+    from drake_abs.reference.drake_twin import make_drake_twin
 
     spec = _scene_spec(scene, config, s.time_step)
     twin = make_drake_twin(spec, s.family, sampled_outputs=False)

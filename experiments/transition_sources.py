@@ -7,9 +7,10 @@ them and its prediction errors measured.
 Sources (every one seeded: the same arguments give identical arrays):
 
 - :func:`sap_transitions`: the scene's Drake twin (``make_drake_twin`` of
-  ``diagrams/drake_twin.py``: the same model files in a discrete MultibodyPlant at the scene's time
-  step, compliant point contact through a collision sphere at each declared contact point; a point
-  contact of radius 0 becomes a 1 mm sphere, whose surface lies 1 mm below the point). Its state is
+  ``drake_abs/reference/drake_twin.py``: the same model files in a discrete MultibodyPlant at
+  the scene's time step, compliant point contact through a collision sphere at each declared
+  contact point; a point contact of radius 0 becomes a 1 mm sphere, whose surface lies 1 mm below
+  the point). Its state is
   checked to be ours entry by entry (the same position and velocity names in the same order,
   :func:`check_drake_coordinates`). One step = Drake's discrete update of the diagram.
 - :func:`mujoco_transitions`: ``gym_hopper`` and ``gym_half_cheetah`` in gymnasium's
@@ -332,11 +333,11 @@ def sap_transitions(
 ) -> Transitions:
     """``episodes`` rollouts of ``steps`` steps of the scene's Drake twin (a discrete
     MultibodyPlant at the scene's time step, ``approximation`` in sap, similar, lagged; point
-    contact ``material`` as :func:`~drake_abs.diagrams.drake_twin.make_drake_twin` takes it,
+    contact ``material`` as :func:`~drake_abs.reference.drake_twin.make_drake_twin` takes it,
     Drake's defaults otherwise) under ``policy``. Episode e starts at ``initial_state(scene,
     episode_seed(seed, e), initial_state_base, noise)``. An episode ends early only if the
     state stops being finite."""
-    from drake_abs.diagrams.drake_twin import make_drake_twin
+    from drake_abs.reference.drake_twin import make_drake_twin
 
     episodes, steps = _check_sizes(episodes, steps)
     model = scene_model(scene_name)

@@ -33,7 +33,7 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
             "drake_abs.policy",
             "drake_abs.multibody",
         },
-        set(),
+        {"gymnasium"},  # tasks.gym_env: a task as a gymnasium.Env
     ),
     "drake_abs/learning": (
         "drake_abs.learning",
@@ -50,6 +50,11 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         "drake_abs.multibody",
         {"drake_abs.lcp", "drake_abs.contact"},
         {"pydrake", "pinocchio", "yaml"},  # the rigid-body dynamics libraries, scene files
+    ),
+    "drake_abs/reference": (
+        "drake_abs.reference",
+        {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine", "drake_abs.multibody"},
+        {"pydrake", "mujoco", "gymnasium"},  # the reference simulators themselves
     ),
     "systems": (
         "drake_abs.systems",
@@ -82,7 +87,8 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
 # Every layer may use these.
 COMMON = {"numpy", "scipy", "numba", "drake_abs._validation", "__future__"}
 THIRD_PARTY_GUARDED = {
-    "pydrake", "pinocchio", "osqp", "meshcat", "matplotlib", "tqdm", "yaml", "ray",
+    "pydrake", "pinocchio", "osqp", "meshcat", "matplotlib", "tqdm", "yaml", "ray", "mujoco",
+    "gymnasium",
 }  # fmt: skip
 STDLIB = set(sys.stdlib_module_names)
 

@@ -9,7 +9,6 @@ import pytest
 
 from drake_abs import ContactAware, Fixed, point_mass_lcs
 from drake_abs.contact.lcs import LcsStepper
-from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
 from drake_abs.engine import rollout
 from drake_abs.multibody import ComplementarityStepper
@@ -17,6 +16,7 @@ from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
 from drake_abs.multibody.scene import Scene
 from drake_abs.policy.policies import LinearPolicy, MLPPolicy
 from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.reference.drake_twin import make_drake_twin
 from drake_abs.systems import ComplementarityPlant, LcsPlant
 
 H_STEP = 0.02

@@ -205,7 +205,7 @@ def test_sap_layout_and_determinism(sap_box, sap_hopper):
 
 
 def test_sap_twin_coordinates_are_ours():
-    from drake_abs.diagrams.drake_twin import make_drake_twin
+    from drake_abs.reference.drake_twin import make_drake_twin
 
     for scene in ts.SCENES:
         twin = make_drake_twin(ts.scene_model(scene).scene, "sap")

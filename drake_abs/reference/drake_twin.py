@@ -18,6 +18,7 @@ from pydrake.geometry import (
     CollisionFilterDeclaration,
     GeometrySet,
     ProximityProperties,
+    Role,
     SceneGraph,
     Sphere,
 )
@@ -139,8 +140,11 @@ def make_drake_twin(
             f"contact_{k}",
             _properties(mu, material),
         ))  # fmt: skip
-    # only the scene's contacts: points against the ground, each pair's shapes against each other
-    everything = GeometrySet([ground, *on_ground, *(g for pair in pairs for g in pair)])
+    # only the scene's contacts: points against the ground, each pair's shapes against each
+    # other. Every proximity geometry is excluded first, the model files' own collision shapes
+    # included (an MJCF's capsules and floor plane would otherwise touch the ground and the
+    # contact spheres: contacts the scene does not declare)
+    everything = GeometrySet(scene_graph.model_inspector().GetAllGeometryIds(Role.kProximity))
     declaration = CollisionFilterDeclaration().ExcludeWithin(everything)
     declaration.AllowBetween(GeometrySet([ground]), GeometrySet(on_ground))
     for g_a, g_b in pairs:

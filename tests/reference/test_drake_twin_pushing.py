@@ -16,8 +16,8 @@ from pydrake.geometry import Role
 from pydrake.systems.analysis import Simulator
 
 from drake_abs import Exact
-from drake_abs.diagrams.drake_twin import make_drake_twin
 from drake_abs.multibody.builder import build_scene_model
+from drake_abs.reference.drake_twin import make_drake_twin
 
 STEPS, SPEED, GAIN = 100, 0.1, 250.0  # 1 s at the scene's 0.01 s; the pusher at 0.1 m/s
 BOX = slice(2, 8)  # box x, y, z, yaw, pitch, roll (pusher x, y first)

@@ -1,0 +1,17 @@
+"""Reference simulators as steppers: Drake's own discrete MultibodyPlant (SAP, Similar, Lagged)
+on a scene's model files, and MuJoCo (a model file or a gymnasium environment), each returning
+the one step record (:class:`drake_abs.contact.step.Step`) so that they run in the same engine
+(:func:`drake_abs.engine.open_loop`, :func:`~drake_abs.engine.rollout`,
+:func:`~drake_abs.engine.record`) as this package's own steppers.
+
+- :class:`~drake_abs.reference.drake_plant.DrakePlantStepper`: a scene's Drake twin
+  (:func:`~drake_abs.reference.drake_twin.make_drake_twin`), Jacobians by AutoDiffXd.
+- :class:`~drake_abs.reference.mujoco_plant.MujocoStepper`: MuJoCo's ``mj_step``, ``frame_skip``
+  times per step, Jacobians by MuJoCo's finite differences (``mjd_transitionFD``). MuJoCo is an
+  optional dependency, imported only when a MuJoCo stepper is made.
+
+Import the modules themselves (``from drake_abs.reference.drake_plant import
+DrakePlantStepper``): this package imports neither Drake nor MuJoCo by itself.
+"""
+
+__all__: list[str] = []
