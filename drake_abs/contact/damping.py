@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import ParameterDerivatives, StepQuantities
+from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 
 
 def check_damping(damping: np.ndarray, nv: int, h: float) -> np.ndarray:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import StepQuantities
+from drake_abs.contact.step_data import StepQuantities
 
 _AFFINE_JOINTS = ("prismatic", "weld")
 CHECK_RTOL = 1e-9  # the affine prediction against the provider at a second state

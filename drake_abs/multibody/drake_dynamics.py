@@ -27,8 +27,9 @@ from pydrake.multibody.tree import (
     UnitInertia_,
 )
 
-from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities
+from drake_abs.contact.cone import FrictionCone
 from drake_abs.contact.damping import implicit_damping
+from drake_abs.contact.step_data import StepQuantities
 from drake_abs.multibody.affine_dynamics import AffineDynamics
 from drake_abs.multibody.floating import quaternion_starts
 from drake_abs.multibody.geometry_contacts import PairContact, pair_geometry, pair_tangents
@@ -539,7 +540,7 @@ class ContactModelBase(ABC):
 
 
 class MultibodyContactModel(ContactModelBase):
-    """Evaluates :class:`~drake_abs.contact.contact_lcp.StepQuantities` for a finalized continuous
+    """Evaluates :class:`~drake_abs.contact.step_data.StepQuantities` for a finalized continuous
     MultibodyPlant (double) and a list of point contacts against one ground plane, through the
     plant itself (AutoDiffXd for derivatives). Any joint type. Arguments as
     :class:`ContactModelBase`.

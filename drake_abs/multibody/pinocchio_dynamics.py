@@ -1,5 +1,5 @@
 """A Drake MultibodyPlant's rigid-body dynamics evaluated by pinocchio, with analytic derivatives:
-the fast provider of :class:`~drake_abs.contact.contact_lcp.StepQuantities` for the complementarity
+the fast provider of :class:`~drake_abs.contact.step_data.StepQuantities` for the complementarity
 step.
 
 :func:`pinocchio_model_from_plant` copies a finalized MultibodyPlant (masses, inertias, joint
@@ -44,8 +44,8 @@ from pydrake.multibody.tree import (
     WeldJoint,
 )
 
-from drake_abs.contact.contact_lcp import StepQuantities
 from drake_abs.contact.damping import check_damping
+from drake_abs.contact.step_data import StepQuantities
 from drake_abs.multibody.drake_dynamics import (
     ContactModelBase,
     PointContact,

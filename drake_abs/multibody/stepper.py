@@ -19,17 +19,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import (
-    FORMULATIONS,
-    FrictionCone,
-    ParameterDerivatives,
-    StepQuantities,
-    contact_step,
-)
+from drake_abs.contact.cone import FORMULATIONS, FrictionCone
+from drake_abs.contact.contact_lcp import contact_step
 from drake_abs.contact.damping import damped_parameters
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
+from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 from drake_abs.multibody.drake_dynamics import (
     INERTIA_ENTRIES,
     INERTIA_INDEX,
@@ -51,7 +47,7 @@ class ContactProblem:
     """The inputs of one batched step's LCP (:meth:`ComplementarityStepper.contact_problem`).
 
     Attributes:
-        quantities: the step's :class:`~drake_abs.contact.contact_lcp.StepQuantities` (no
+        quantities: the step's :class:`~drake_abs.contact.step_data.StepQuantities` (no
             state derivatives): W and v_free of the damped step, distances ``phi`` (m) and
             rows ``Jn`` of the ``n_contacts`` candidates followed by the joint-limit rows,
             tangent rows ``Jt``.
@@ -87,7 +83,7 @@ class ComplementarityStepper:
         friction: the friction formulation, ``"stewart_trinkle"`` (default, the papers') or
             ``"anitescu"`` (monotone; converges under every smoothing, but a sliding contact
             lifts off at ``alpha |v_t|``): see
-            :class:`~drake_abs.contact.contact_lcp.FrictionCone`.
+            :class:`~drake_abs.contact.cone.FrictionCone`.
         joint_limits: honour the plant's joint position limits (unilateral rows in the same
             LCP as the contacts, smoothed by the same policy, pruned by the same activation
             distance in rad or m) and its actuators' effort limits (the input is clipped to

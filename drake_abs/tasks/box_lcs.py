@@ -12,7 +12,7 @@ bottom of the body, with a linearised friction cone of k = 2 directions (+x, -x)
 
 
 and the LCP rows, matrix F and offsets z are those of
-:func:`drake_abs.contact.contact_lcp.assemble_lcp` (built by calling it, not re-derived here):
+:func:`drake_abs.contact.stewart_trinkle.assemble_lcp` (built by calling it, not re-derived here):
 normal (m), two friction rows (m/s) with the same tangential regularisation, and the cone row (N s).
 
 State ``x = (p_x, p_z, v_x, v_z)`` (m, m/s; p_z is the height of the body's centre, the ground
@@ -33,15 +33,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_abs.contact.contact_lcp import (
-    CONTACT_SOLVER_DEFAULTS,
-    FrictionCone,
-    StepQuantities,
-    assemble_lcp,
-    expand_mu,
-)
+from drake_abs.contact.cone import FrictionCone, expand_mu
+from drake_abs.contact.contact_lcp import CONTACT_SOLVER_DEFAULTS
 from drake_abs.contact.lcs import LCS, GradientMode, LcsStepper
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy, WrappedPolicy
+from drake_abs.contact.step_data import StepQuantities
+from drake_abs.contact.stewart_trinkle import assemble_lcp
 
 #: Tangent directions of the planar cone, in (x, z) velocity coordinates: +x, -x (the order of
 #: ``systems.multibody_quantities.tangent_directions`` for the normal +z and k = 2).
@@ -100,7 +97,7 @@ class TranslatingBox:
     Attributes:
         mass: kg. half_height: m. friction: Coulomb coefficient (>= 0). time_step: h in s.
         gravity: m/s^2. regularization: the cone's tangential compliance (see
-            :class:`~drake_abs.contact.contact_lcp.FrictionCone`).
+            :class:`~drake_abs.contact.cone.FrictionCone`).
         lcs: the LCS (dx = 4, du = 1, d = 4), built at construction.
         cone: the friction cone (one contact, k = 2).
     """

@@ -9,7 +9,10 @@ import pytest
 from numdiff import central_difference
 
 from drake_abs import ContactAware, Exact, Fixed, solve_lcp
-from drake_abs.contact.contact_lcp import FrictionCone, StepQuantities, assemble_lcp, contact_step
+from drake_abs.contact.cone import FrictionCone
+from drake_abs.contact.contact_lcp import contact_step
+from drake_abs.contact.step_data import StepQuantities
+from drake_abs.contact.stewart_trinkle import assemble_lcp
 from drake_abs.multibody import build_scene_model
 
 H = 0.01
