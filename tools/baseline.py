@@ -35,6 +35,14 @@ EXPERIMENTS = (
     "ball-throw",
     "smoothing-vs-rs",
     "speed-accuracy",
+    "locomotion-variance",
+    "locomotion",
+    "mujoco-comparison",
+    "locomotion-transfer",
+    "implicit-learning",
+    "model-learning",
+    "model-based-fopg",
+    "scene-recordings",
 )
 # benchmark script -> its arguments (quick sizes); each writes the JSON file named by --json
 BENCHMARKS = {
@@ -61,10 +69,13 @@ def _bin(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
-def run_all(work: Path) -> dict[str, object]:
-    """Run every experiment and benchmark into ``work``; returns name -> parsed JSON."""
+def run_all(work: Path, only: set[str] | None = None) -> dict[str, object]:
+    """Run every experiment and benchmark (or those named in ``only``) into ``work``; returns
+    name -> parsed JSON."""
     out: dict[str, object] = {}
     for name in EXPERIMENTS:
+        if only is not None and name not in only:
+            continue
         folder = work / name
         cmd = [_bin("drake-abs"), "experiment", name, "--test-size", "--out", str(folder)]
         print("running", " ".join(cmd[1:]), flush=True)
@@ -73,6 +84,8 @@ def run_all(work: Path) -> dict[str, object]:
             f.name: json.loads(f.read_text()) for f in sorted(folder.glob("*.json"))
         }
     for name, args in BENCHMARKS.items():
+        if only is not None and name not in only:
+            continue
         path = work / f"{name}.json"
         cmd = [sys.executable, str(ROOT / "benchmarks" / f"{name}.py"), *args, "--json", str(path)]
         print("running", name, *args, flush=True)
@@ -136,11 +149,14 @@ def main() -> int:
     parser.add_argument("mode", choices=("record", "compare"))
     parser.add_argument("--dir", type=Path, default=ROOT / "benchmarks" / "baselines")
     parser.add_argument("--rtol", type=float, default=1e-12)
+    parser.add_argument(
+        "--only", nargs="+", metavar="NAME", help="these experiments and benchmarks only"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        results = run_all(Path(tmp))
+        results = run_all(Path(tmp), set(args.only) if args.only else None)
     if args.mode == "record":
-        if args.dir.exists():
+        if args.dir.exists() and not args.only:
             shutil.rmtree(args.dir)
         for key, value in results.items():
             path = args.dir / f"{key}.json"

@@ -13,7 +13,14 @@ from drake_abs.engine.closed_loop import (
     rollout,
     rollout_memory_bytes,
 )
-from drake_abs.engine.protocols import Policy, PullbackPolicy, Reward, Stepper, TransitionReward
+from drake_abs.engine.protocols import (
+    Policy,
+    PullbackPolicy,
+    Reward,
+    Stepper,
+    TimeVaryingPolicy,
+    TransitionReward,
+)
 from drake_abs.engine.steppers import LinearStepper, ModelJacobians
 
 __all__ = [
@@ -24,6 +31,7 @@ __all__ = [
     "PullbackPolicy",
     "Reward",
     "Stepper",
+    "TimeVaryingPolicy",
     "Trajectory",
     "TransitionReward",
     "open_loop",

@@ -47,6 +47,7 @@ from drake_abs.engine.protocols import (
     PullbackPolicy,
     Reward,
     Stepper,
+    TimeVaryingPolicy,
     TransitionReward,
     check_protocol,
     check_reward,
@@ -160,7 +161,11 @@ def rollout(
             ``"flag"`` or ``"raise"`` (:mod:`drake_abs.contact.unconverged` says why).
     """
     check_protocol(stepper, Stepper, "stepper", STEPPER_FORM)
-    if policy is not None:
+    if getattr(policy, "time_varying", False):
+        check_protocol(
+            policy, TimeVaryingPolicy, "policy", "time_varying, nx, nu, act(theta, x, t)"
+        )
+    elif policy is not None:
         check_protocol(policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
     if reward is not None:
         check_reward(reward)
@@ -302,6 +307,12 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
     of_transition = reward is not None and isinstance(reward, TransitionReward)
     ends = of_transition and hasattr(reward, "terminated")
     alive = np.ones((M, H + 1), dtype=bool)
+    timed = policy is not None and getattr(policy, "time_varying", False)
+    if timed and jacobians:
+        raise ValueError(
+            f"{type(policy).__name__} is time-varying (act(theta, x, t)): it runs without "
+            "gradients (gradient=False), as scripted and feedback controllers do"
+        )
     pullback = jacobians and isinstance(policy, PullbackPolicy)
     vjps = [] if (jacobians and policy is not None) else None
     for t in range(H):
@@ -312,6 +323,8 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
             u, vjp = policy.pullback(theta, x)
             u = u + sigma * noise[:, t]
             vjps.append(vjp)
+        elif timed:
+            u = policy.act(theta, x, t) + sigma * noise[:, t]
         else:
             u = policy.act(theta, x) + sigma * noise[:, t]
             if vjps is not None:

@@ -5,6 +5,7 @@ Shapes are for a batch of M states: x (M, nx), u (M, nu), flat policy parameters
 - :class:`Stepper`: ``step(x, u, *, jacobians, parameters) -> Step`` (the one step record,
   :class:`drake_abs.contact.step.Step`), and the names of its model parameters.
 - :class:`Policy`: ``u = pi(x; theta)`` with ``act``, ``jacobians`` and ``vjp``.
+- :class:`TimeVaryingPolicy`: a controller of the state and the step index, run forward only.
 - :class:`PullbackPolicy`: a policy whose vector-Jacobian product needs the work of its forward
   evaluation (an MPC's KKT system): ``pullback(theta, x) -> (u, vjp)``; the engine then keeps
   ``vjp`` for the reverse pass instead of calling ``Policy.vjp`` again.
@@ -61,6 +62,20 @@ class Policy(Protocol):
     def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]: ...
 
     def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@runtime_checkable
+class TimeVaryingPolicy(Protocol):
+    """A controller of the state and the step index, ``u = pi(x, t; theta)``, marked by the
+    class attribute ``time_varying = True``: ``act(theta, x (M, nx), t: int) -> u (M, nu)``
+    (a scripted gait, a stepping controller, seeded random inputs). The engine runs it forward
+    only (``gradient=False``): it has no Jacobians."""
+
+    time_varying: bool
+    nx: int
+    nu: int
+
+    def act(self, theta, x, t: int) -> np.ndarray: ...
 
 
 #: ``vjp(g_u (M, nu)) -> (g_x (M, nx), g_theta (M, P))`` at the point where it was made.

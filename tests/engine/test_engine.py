@@ -297,3 +297,30 @@ def test_an_overflowing_contact_free_step_is_flagged_not_valid():
     with np.errstate(all="ignore"):  # the thrust overflows
         step = qc.QuadcopterStepper(PRM).step(np.zeros((2, 12)), np.full((2, 4), 1e160))
     assert not step.converged.any()
+
+
+class _Sine:
+    """A time-varying controller: u_t = sin(0.3 t), whatever the state."""
+
+    time_varying = True
+    nx, nu = 2, 1
+
+    def act(self, theta, x, t):
+        return np.full((x.shape[0], 1), np.sin(0.3 * t))
+
+
+def test_a_time_varying_policy_runs_forward_and_equals_its_open_loop():
+    from drake_abs.contact.lcs import LcsStepper
+    from drake_abs.engine import open_loop, rollout
+    from drake_abs.tasks.point_mass import point_mass_lcs
+
+    stepper = LcsStepper(point_mass_lcs(1))
+    x0 = np.array([0.5, 0.0])
+    closed = rollout(stepper, _Sine(), np.zeros(0), x0, np.zeros((1, 12, 1)), gradient=False)
+    inputs = np.sin(0.3 * np.arange(12))[:, None]
+    np.testing.assert_array_equal(closed.x, open_loop(stepper, x0, inputs, jacobians=False).x)
+    with pytest.raises(ValueError, match="time-varying"):
+        from drake_abs.policy.rewards import QuadraticReward
+
+        reward = QuadraticReward(Q=np.eye(2), R=np.eye(1), x_goal=np.zeros(2))
+        rollout(stepper, _Sine(), np.zeros(0), x0, np.zeros((1, 12, 1)), reward)
