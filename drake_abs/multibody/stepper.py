@@ -11,7 +11,6 @@ applies every setting the scene names.
 from __future__ import annotations
 
 import copy
-import difflib
 import functools
 import warnings
 from collections.abc import Mapping, Sequence
@@ -26,15 +25,19 @@ from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
-from drake_abs.multibody.drake_dynamics import (
-    INERTIA_ENTRIES,
-    INERTIA_INDEX,
-    ContactModelBase,
-    central_unit_inertia,
-    spatial_inertia,
-)
+from drake_abs.multibody.drake_dynamics import ContactModelBase
 from drake_abs.multibody.floating import normalize_quaternions
 from drake_abs.multibody.joint_limits import JointLimitRows, effort_limits, joint_damping
+from drake_abs.multibody.parameters import (
+    damping_columns,
+    damping_joints,
+    parameter_columns,
+    parameter_derivatives,
+    parameter_names,
+    parameter_values,
+    parameter_vector,
+    with_values,
+)
 
 #: how deep (m) a candidate left out of a step's LCP may end below the ground before the step
 #: is solved again with it (see ``ComplementarityStepper._repair``)
@@ -188,47 +191,17 @@ class ComplementarityStepper:
           entries of the matrix; Drake's sign convention, the matrix entries). These come last,
           so the columns before them keep their indices.
 
-        :meth:`with_parameters` gives a stepper with other values of any of them.
+        :meth:`with_parameters` gives a stepper with other values of any of them
+        (:mod:`drake_abs.multibody.parameters`).
         """
-        m = self.model
-        coeff = m.cone.coefficients
-        points = m.point_contacts
-        return (
-            ("ground_height",)
-            + tuple(f"friction[{i}]" for i in np.flatnonzero(~np.isnan(coeff)))
-            + tuple(f"mass[{name}]" for name in m.massive_bodies)
-            + tuple(f"radius[{i}]" for i in points)
-            + tuple(f"damping[{name}]" for name, _ in self._damping_joints)
-            + tuple(f"offset[{i}].{axis}" for i in points for axis in "xyz")
-            + tuple(
-                f"unit_inertia[{name}].{entry}"
-                for name in m.massive_bodies
-                for entry in INERTIA_ENTRIES
-            )
-        )
+        return parameter_names(self.model, self._damping_joints)
 
     @functools.cached_property
     def _damping_joints(self) -> tuple[tuple[str, int], ...]:
         """``(name, velocity index)`` of every one-velocity joint, the joint-damping parameters
         (none when this stepper does not apply damping). A name that occurs in several model
         instances is qualified as ``"instance::joint"``."""
-        if not self._flags["damping"]:
-            return ()
-        plant = self.model.plant
-        joints = [plant.get_joint(j) for j in plant.GetJointIndices()]
-        joints = [j for j in joints if j.num_velocities() == 1]
-        counts: dict[str, int] = {}
-        for j in joints:
-            counts[j.name()] = counts.get(j.name(), 0) + 1
-        return tuple(
-            (
-                j.name()
-                if counts[j.name()] == 1
-                else f"{plant.GetModelInstanceName(j.model_instance())}::{j.name()}",
-                int(j.velocity_start()),
-            )
-            for j in joints
-        )
+        return damping_joints(self.model.plant) if self._flags["damping"] else ()
 
     def with_smoothing(self, smoothing: SmoothingPolicy) -> ComplementarityStepper:
         """The same stepper with another smoothing policy (larger mu: more smoothing)."""
@@ -245,18 +218,7 @@ class ComplementarityStepper:
         candidates' offsets (m), the bodies' unit rotational inertias about their centres of
         mass (m^2). The masses and inertias are those the dynamics use (the plant's defaults,
         or those :meth:`with_parameters` set)."""
-        m = self.model
-        coeff = m.cone.coefficients
-        inertias = [m.body_spatial_inertia(index) for _, index in m._massive]
-        rows, cols = np.array(INERTIA_INDEX).T
-        points = [m.contacts[i] for i in m.point_contacts]
-        return np.concatenate([
-            [m.ground.height], coeff[~np.isnan(coeff)], [M.get_mass() for M in inertias],
-            [c.radius for c in points],
-            [self.damping[v] for _, v in self._damping_joints],
-            np.reshape([c.p_BC for c in points], -1),
-            np.reshape([central_unit_inertia(M)[rows, cols] for M in inertias], -1),
-        ]).astype(float)  # fmt: skip
+        return parameter_values(self.model, self.damping, self._damping_joints)
 
     def with_parameters(self, values: np.ndarray | Mapping[str, float]) -> ComplementarityStepper:
         """A stepper whose :meth:`parameter_values` are ``values`` (this one is left as it is):
@@ -279,49 +241,10 @@ class ComplementarityStepper:
         """
         names = self.parameter_names
         current = self.parameter_values()
-        new = _parameter_vector(values, names, current)
-        value = dict(zip(names, new.tolist(), strict=True))
-        changed = {n: x for n, x, old in zip(names, new.tolist(), current, strict=True) if x != old}
-        m = self.model
-        ground = m.ground
-        if "ground_height" in changed:
-            ground = replace(ground, height=value["ground_height"])
-        rebuild = "ground_height" in changed
-        contacts = list(m.contacts)
-        for i, c in enumerate(contacts):
-            fields = {}
-            if f"friction[{i}]" in changed:
-                fields["friction"] = value[f"friction[{i}]"]
-            if f"radius[{i}]" in changed:
-                fields["radius"] = value[f"radius[{i}]"]
-            if any(f"offset[{i}].{a}" in changed for a in "xyz"):
-                fields["p_BC"] = tuple(value[f"offset[{i}].{a}"] for a in "xyz")
-            if fields:
-                contacts[i] = replace(c, **fields)
-                rebuild = True
-        inertias = dict(m.spatial_inertias)
-        for body, index in m._massive:
-            keys = [f"mass[{body}]"] + [f"unit_inertia[{body}].{e}" for e in INERTIA_ENTRIES]
-            if not any(k in changed for k in keys):
-                continue
-            G = [value[k] for k in keys[1:]]
-            rebuild = True
-            try:
-                inertias[int(index)] = spatial_inertia(
-                    value[keys[0]], m.body_spatial_inertia(index).get_com(), G
-                )
-            except RuntimeError:  # Drake's check of the inertia's physical validity
-                raise ValueError(
-                    f"values: unit_inertia[{body}] (xx, yy, zz, xy, xz, yz) = {tuple(G)} m^2 is "
-                    "not a physically valid unit inertia: its principal moments must be >= 0 and "
-                    "satisfy the triangle inequality"
-                ) from None
-        model = m
-        if rebuild:  # the provider, on the same plant
-            model = m.rebuilt(contacts=contacts, ground=ground, spatial_inertias=inertias)
-        damping = self.damping.copy()
-        for joint, v in self._damping_joints:
-            damping[v] = value[f"damping[{joint}]"]
+        new = parameter_vector(values, names, current)
+        model, damping, changed = with_values(
+            self.model, self.damping, self._damping_joints, names, new, current
+        )
         other = copy.copy(self)
         other.__dict__.pop("_cones", None)  # friction cones of this model
         other.model = model
@@ -337,70 +260,6 @@ class ComplementarityStepper:
         """The smoothing policy's numeric parameters as ``step(..., smoothing_parameters=True)``
         names its columns: ``"smoothing.<name>"`` (e.g. ``smoothing.mu_max``)."""
         return tuple(f"smoothing.{n}" for n in self.smoothing.parameter_names)
-
-    def _parameter_derivatives(self, idx, cone, q, v, u, names) -> ParameterDerivatives:
-        """The theta block of one group's quantities (states q, v, u) for the columns
-        ``names``: every contact's distance falls by the ground height's increase; each
-        frictional contact's coefficient is its own column; the masses and unit inertias move W
-        and the free velocity; a point candidate's radius and offset move its distance and its rows
-        (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.point_parameter_derivatives`);
-        the smoothing parameters (trailing columns) move mu only. The joint-damping columns are
-        filled in later, on the damped step (:meth:`_joint_rows`)."""
-        column = {name: j for j, name in enumerate(names)}
-        B, T = q.shape[0], len(names)
-        nv = self.sizes[1]
-        dphi = np.zeros((B, idx.size, T))
-        if "ground_height" in column:
-            dphi[:, :, column["ground_height"]] = -1.0
-        dfriction = np.zeros((cone.frictional.size, T))
-        for f, local in enumerate(cone.frictional):
-            j = column.get(f"friction[{idx[local]}]")
-            if j is not None:
-                dfriction[f, j] = 1.0
-        # the inertial columns asked for, and their columns of the provider's derivatives
-        # (inertial_derivatives: every mass, then every body's six unit-inertia entries)
-        bodies = self.model.massive_bodies
-        inertial = [f"mass[{n}]" for n in bodies] + [
-            f"unit_inertia[{n}].{e}" for n in bodies for e in INERTIA_ENTRIES
-        ]
-        pairs = [(column[key], k) for k, key in enumerate(inertial) if key in column]
-        dW = np.zeros((B, nv, nv, T))
-        dv_free = np.zeros((B, nv, T))
-        if pairs:
-            to, of = (list(x) for x in zip(*pairs, strict=True))
-            dW_i, dv_free_i = self.model.inertial_derivatives(q, v, u)
-            dW[..., to], dv_free[..., to] = dW_i[..., of], dv_free_i[..., of]
-        # each candidate's geometry columns: radius, offset x, y, z (-1: not a column)
-        geometry = np.array(
-            [
-                [
-                    column.get(key, -1)
-                    for key in (f"radius[{i}]", *(f"offset[{i}].{a}" for a in "xyz"))
-                ]
-                for i in idx
-            ],
-            dtype=np.int64,
-        ).reshape(idx.size, 4)
-        dJn = dJt = None
-        if (geometry >= 0).any():
-            g_phi, g_Jn, g_Jt = self.model.point_parameter_derivatives(q, idx)
-            dJn = np.zeros((B, idx.size, nv, T))
-            dJt = np.zeros((B, cone.sizes()[1], nv, T))
-            k = cone.directions
-            for local, c in zip(*np.nonzero(geometry >= 0), strict=True):
-                j = geometry[local, c]
-                dphi[:, local, j] += g_phi[:, local, c]
-                dJn[:, local, :, j] = g_Jn[:, local, :, c]
-            for f, local in enumerate(cone.frictional):  # its k tangent rows
-                for c in np.flatnonzero(geometry[local] >= 0):
-                    dJt[:, f * k : (f + 1) * k, :, geometry[local, c]] = g_Jt[
-                        :, f * k : (f + 1) * k, :, c
-                    ]
-        smoothing = [j for name, j in column.items() if name.startswith("smoothing.")]
-        return ParameterDerivatives(
-            dphi, dfriction, dW, dv_free, dJn=dJn, dJt=dJt,
-            smoothing_from=min(smoothing) if smoothing else None,
-        )  # fmt: skip
 
     def step(
         self,
@@ -424,7 +283,7 @@ class ComplementarityStepper:
         if (parameters or smoothing_parameters) and not jacobians:
             raise ValueError("parameters=True and smoothing_parameters=True need jacobians=True")
         # the theta columns: the model's parameters, then the smoothing policy's
-        names = self._theta_names(parameters) + (
+        names = parameter_columns(parameters, lambda: self.parameter_names) + (
             self.smoothing_parameter_names if smoothing_parameters else ()
         )
         nq, nv, nu, nc = self.sizes
@@ -509,23 +368,6 @@ class ComplementarityStepper:
                 saturated = None
         return x, u, saturated
 
-    def _theta_names(self, parameters) -> tuple[str, ...]:
-        """The theta columns of ``parameters``: True (all), False (none) or some names."""
-        if isinstance(parameters, (bool, np.bool_)):
-            return self.parameter_names if parameters else ()
-        if isinstance(parameters, str):
-            raise ValueError(f"parameters must be True, False or a sequence of names; got the "
-                             f"string {parameters!r}")  # fmt: skip
-        names = tuple(parameters)
-        known = set(self.parameter_names)
-        unknown = [n for n in names if n not in known]
-        if unknown or len(set(names)) != len(names):
-            raise ValueError(
-                f"parameters must be distinct names among parameter_names; got {list(names)} "
-                f"(unknown: {unknown})"
-            )
-        return names
-
     def contact_problem(
         self, x: np.ndarray, u: np.ndarray, *, parameters: bool | Sequence[str] = True
     ) -> ContactProblem:
@@ -546,8 +388,8 @@ class ComplementarityStepper:
         lidx = np.arange(self.limits.size)
         quant = self.model.quantities(q, v, u, idx, derivatives=False, damping=self._damping)
         cone = self._cone(idx, lidx.size)
-        names = self._theta_names(parameters)
-        par = self._parameter_derivatives(idx, cone, q, v, u, names) if names else None
+        names = parameter_columns(parameters, lambda: self.parameter_names)
+        par = parameter_derivatives(self.model, idx, cone, q, v, u, names) if names else None
         quant, par = self._joint_rows(quant, par, q, lidx, False, names)
         return ContactProblem(quant, cone, float(self.model.h), par, names, nc)
 
@@ -571,7 +413,7 @@ class ComplementarityStepper:
         rows (frictionless; their distances and rows do not depend on the model parameters),
         and the model-parameter derivatives (columns ``names``) carried to the damped step (the
         provider took the joint damping: ``quantities(..., damping=...)``), with the damping's
-        own columns (:meth:`_damping_columns`)."""
+        own columns (:func:`~drake_abs.multibody.parameters.damping_columns`)."""
         if lidx.size:
             P = quant.dphi.shape[-1] if jacobians else None
             phi, J, dphi, dJ = self.limits.rows(q, lidx, self.sizes[1], P)
@@ -596,27 +438,7 @@ class ComplementarityStepper:
             return quant, par
         if self._damps:  # the provider took the damping (quantities): carry theta's to it
             par = damped_parameters(par, quant.W, quant.v_free, self.damping, self.model.h)
-        return quant, self._damping_columns(par, quant, names)
-
-    def _damping_columns(self, par: ParameterDerivatives, quant, names) -> ParameterDerivatives:
-        """``par`` with the joint-damping columns of ``names`` filled in, on the damped step's
-        ``W' = (M + h D)^-1`` and ``v_free' = W' M v_free`` (``quant``; with all damping 0 the
-        undamped ones, W' = W): for joint velocity j, ``dW'/dD_j = -h W' e_j e_j^T W'`` and
-        ``dv_free'/dD_j = -h W' e_j v_free'_j`` (docs/math.md section 6d)."""
-        column = {name: j for j, name in enumerate(names)}
-        cols = [
-            (column[f"damping[{name}]"], v)
-            for name, v in self._damping_joints
-            if f"damping[{name}]" in column
-        ]
-        if not cols:
-            return par
-        h, W, v_free = self.model.h, quant.W, quant.v_free
-        dW, dv_free = par.dW.copy(), par.dv_free.copy()
-        for j, v in cols:
-            dW[..., j] = -h * W[:, :, v, None] * W[:, None, v, :]
-            dv_free[..., j] = -h * W[:, :, v] * v_free[:, v, None]
-        return replace(par, dW=dW, dv_free=dv_free)
+        return quant, damping_columns(par, quant, names, self._damping_joints, self.model.h)
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: tuple) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
@@ -656,7 +478,9 @@ class ComplementarityStepper:
             cone = self._cone(idx, lidx.size)
             par = None
             if parameters:
-                par = self._parameter_derivatives(idx, cone, q[rows], v[rows], u[rows], parameters)
+                par = parameter_derivatives(
+                    self.model, idx, cone, q[rows], v[rows], u[rows], parameters
+                )
             quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians, parameters)
             r = contact_step(
                 quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
@@ -745,60 +569,6 @@ class ComplementarityStepper:
                 out[key][:, cols] = value
             else:
                 out[key][np.ix_(rows, cols)] = value
-
-
-#: the lower ends of the model parameters' ranges, by name prefix: (bound, strict, unit)
-_PARAMETER_RANGES = {
-    "friction[": (0.0, False, ""),
-    "mass[": (0.0, True, " kg"),
-    "radius[": (0.0, False, " m"),
-    "damping[": (0.0, False, " N m s / rad or N s / m"),
-}
-
-
-def _parameter_vector(values, names: tuple[str, ...], current: np.ndarray) -> np.ndarray:
-    """The parameter vector (T,) that :meth:`ComplementarityStepper.with_parameters`'s
-    ``values`` give (an array in ``names`` order, or a mapping of some names to values, the
-    others ``current``), checked: finite, and each within its range."""
-    T = len(names)
-    expected = (
-        f"an array of all {T} parameter values in parameter_names order, or a mapping "
-        "{name: value} of some of them"
-    )
-    if isinstance(values, Mapping):
-        new = np.array(current, dtype=float)
-        index = {n: j for j, n in enumerate(names)}
-        for key, x in values.items():
-            if key not in index:
-                close = difflib.get_close_matches(str(key), names, n=1)
-                hint = f" (did you mean {close[0]!r}?)" if close else ""
-                raise ValueError(
-                    f"values: unknown parameter name {key!r}{hint}; values must be {expected}, "
-                    f"with names from parameter_names: {', '.join(names)}"
-                )
-            try:
-                new[index[key]] = float(x)
-            except (TypeError, ValueError):
-                raise ValueError(f"values[{key!r}] must be a number; got {x!r}") from None
-    else:
-        try:
-            new = np.array(values, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"values must be {expected}; got {type(values).__name__} {values!r:.80}"
-            ) from None
-        if new.shape != (T,):
-            raise ValueError(f"values must be {expected}; got an array of shape {new.shape}")
-    for j, name in enumerate(names):
-        x = new[j]
-        if not np.isfinite(x):
-            raise ValueError(f"values[{name!r}] must be finite; got {x}")
-        for prefix, (bound, strict, unit) in _PARAMETER_RANGES.items():
-            if name.startswith(prefix) and (x <= bound if strict else x < bound):
-                raise ValueError(
-                    f"values[{name!r}] must be {'>' if strict else '>='} {bound:g}{unit}; got {x}"
-                )
-    return new
 
 
 def _groups_by_active_set(active: np.ndarray) -> list[tuple]:
