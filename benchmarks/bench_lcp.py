@@ -6,8 +6,8 @@ of several repeats. Unless stated otherwise our solves request ``mu = 1e-10`` wi
 ``jacobians=True``, i.e. the timings include the implicit Jacobians ``dlam_dq`` and ``dlam_dmu``.
 
 Random P-matrix LCPs of size d are ``F = A A^T / d + 0.1 I + 0.3 (W - W^T)`` with ``A, W`` standard
-normal (d x d) and ``q`` standard normal (d,): the symmetric part of F is positive definite, so the
-LCP has a unique solution for every q.
+normal (d x d) and ``q`` standard normal (d,) (``drake_abs.lcp.problems.random_p_matrices``): the
+symmetric part of F is positive definite, so the LCP has a unique solution for every q.
 
 Sections:
 
@@ -29,19 +29,19 @@ Sections:
    ``mu = 0``) against time per problem; (b) for the exact LCP (``mu = 0``) and each
    ``exact_tol = tol``, the achieved residual and error against Moby against time per problem.
 
-5. Problem families: for each family and size d in (10, 16, 20, 24, 32, 48, 64, 101)
-   (friction: d = 12 .. 102), how many problems converge at mu = 0 with the interior point alone
-   (second starts on, crossover off) and with the crossover (the default), the interior-point
-   iterations and principal pivots taken, the solver's residual and an independent check of each
-   converged answer (``max(-w_i, min(lam_i F_ii, |w_i|)) / (|q_i| + (|F| |lam|)_i)``, recomputed
-   in the original units), and how many converge at mu = 1e-6 (where the crossover only supplies
-   a start, docs/math.md section 3b). Families: Csizmadia (1 on the diagonal, -1 below; q with
-   solution (1, 0, 1, ...)), Murty (1 on the diagonal, 2 below, q = -1), Fathy (L L^T, L with 1 on
-   the diagonal and 2 below, q = -1), random non-symmetric P-matrices with an indefinite symmetric
-   part (``D1 P D2``, positive diagonals over two decades), random singular PSD (``J J^T`` of rank
-   d/2, q strictly feasible), ill-conditioned PD (cond 1e10, q standard normal) and frictional
-   contact (Stewart-Trinkle, 4 directions per contact, random Jacobians and velocities; copositive,
-   not P, solved with ``on_bad_matrix="attempt"``).
+5. Problem families: for each family and size d in (10, 16, 20, 24, 32, 48, 64, 101) (friction: d =
+   12 .. 102), how many problems converge at mu = 0 with the interior point alone (second starts on,
+   crossover off) and with the crossover (the default), the interior-point iterations and principal
+   pivots taken, the solver's residual and an independent check of each converged answer
+   (``max(-w_i, min(lam_i F_ii, |w_i|)) / (|q_i| + (|F| |lam|)_i)``, recomputed in the original
+   units), and how many converge at mu = 1e-6 (where the crossover only supplies a start,
+   docs/math.md section 3b). Families (``drake_abs.lcp.problems``): Csizmadia (1 on the diagonal, -1
+   below; q with solution (1, 0, 1, ...)), Murty (1 on the diagonal, 2 below, q = -1), Fathy (L L^T,
+   L with 1 on the diagonal and 2 below, q = -1), random non-symmetric P-matrices with an indefinite
+   symmetric part (``D1 P D2``, positive diagonals over two decades), random singular PSD (``J J^T``
+   of rank d/2, q strictly feasible), ill-conditioned PD (cond 1e10, q standard normal) and
+   frictional contact (Stewart-Trinkle, 4 directions per contact, random Jacobians and velocities;
+   copositive, not P, solved with ``on_bad_matrix="attempt"``).
 
 Usage::
 
@@ -77,6 +77,16 @@ import numpy as np
 import drake_abs.lcp.ipm
 from drake_abs import solve_lcp
 from drake_abs.lcp.matrix_class import _strictly_diagonally_dominant
+from drake_abs.lcp.problems import (
+    csizmadia,
+    fathy,
+    friction_problems,
+    ill_conditioned_problems,
+    murty,
+    random_p_matrices,
+    scaled_p_problems,
+    singular_psd_problems,
+)
 
 SEED = 20250101
 MU_TARGET = 1e-10
@@ -120,13 +130,6 @@ def rng_for(*key: int) -> np.random.Generator:
     """A generator seeded by SEED and a section/size key, so that every problem set is
     reproducible and independent of the others (and of --quick, up to the problem count)."""
     return np.random.default_rng([SEED, *key])
-
-
-def random_p_matrices(rng: np.random.Generator, d: int, n: int) -> np.ndarray:
-    """n random P-matrices (n, d, d): ``A A^T / d + 0.1 I + 0.3 (W - W^T)``."""
-    A = rng.standard_normal((n, d, d))
-    W = rng.standard_normal((n, d, d))
-    return A @ A.transpose(0, 2, 1) / d + 0.1 * np.eye(d) + 0.3 * (W - W.transpose(0, 2, 1))
 
 
 def random_problems(key: int, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -606,75 +609,6 @@ FRICTION_CONTACTS = (2, 4, 8, 10, 17)  # d = 6 per contact: 12 .. 102
 FAMILY_SMOOTH_MU = 1e-6
 
 
-def csizmadia_problem(d: int) -> tuple[np.ndarray, np.ndarray]:
-    """Csizmadia's matrix (1 on the diagonal, -1 below) and the q whose solution is
-    (1, 0, 1, 0, ...)."""
-    F = 2.0 * np.eye(d) - np.tril(np.ones((d, d)))
-    x = (np.arange(d) % 2 == 0).astype(float)
-    return F, 1.0 - x - F @ x
-
-
-def murty_problem(d: int) -> tuple[np.ndarray, np.ndarray]:
-    """Murty's problem: 1 on the diagonal, 2 below, q = -1 (solution e_1)."""
-    return np.eye(d) + 2.0 * np.tril(np.ones((d, d)), -1), -np.ones(d)
-
-
-def fathy_problem(d: int) -> tuple[np.ndarray, np.ndarray]:
-    """Fathy's problem: L L^T with L of murty_problem, q = -1 (solution e_1)."""
-    L = murty_problem(d)[0]
-    return L @ L.T, -np.ones(d)
-
-
-def scaled_p_problems(rng, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Non-symmetric P-matrices D1 P D2 (indefinite symmetric part), q standard normal."""
-    P = random_p_matrices(rng, d, n)
-    D1 = 10 ** rng.uniform(-1, 1, (n, d, 1))
-    D2 = 10 ** rng.uniform(-1, 1, (n, 1, d))
-    return D1 * P * D2, rng.standard_normal((n, d))
-
-
-def singular_psd_problems(rng, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """J J^T of rank d/2, q = s0 - F lam0 with lam0, s0 > 0 (strictly feasible)."""
-    J = rng.standard_normal((n, d, max(1, d // 2)))
-    F = J @ J.transpose(0, 2, 1)
-    lam0 = rng.uniform(0.01, 1.0, (n, d))
-    s0 = rng.uniform(0.01, 1.0, (n, d))
-    return F, s0 - np.einsum("bij,bj->bi", F, lam0)
-
-
-def ill_conditioned_problems(rng, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric positive definite, eigenvalues log-spaced over 1e0..1e-10."""
-    Qm, _ = np.linalg.qr(rng.standard_normal((n, d, d)))
-    F = Qm @ (np.logspace(0, -10, d)[None, :, None] * Qm.transpose(0, 2, 1))
-    return 0.5 * (F + F.transpose(0, 2, 1)), rng.standard_normal((n, d))
-
-
-def friction_problems(rng, nc: int, n: int, k: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    """Stewart-Trinkle LCPs in (gamma, beta, omega), d = nc (2 + k): random generalised mass
-    matrix (nv = 2 nc + 6), normal and tangent Jacobians, velocities and distances; friction
-    coefficient 0.5."""
-    nv = 2 * nc + 6
-    F = np.zeros((n, nc * (2 + k), nc * (2 + k)))
-    q = np.zeros((n, nc * (2 + k)))
-    E = np.kron(np.eye(nc), np.ones((k, 1)))  # (nc k, nc)
-    for b in range(n):
-        A = rng.standard_normal((nv, nv))
-        Minv = np.linalg.inv(A @ A.T / nv + np.eye(nv))
-        Jn = rng.standard_normal((nc, nv))
-        Dt = rng.standard_normal((nc * k, nv))
-        v = rng.standard_normal(nv)
-        phi_h = rng.uniform(-1.0, 1.0, nc)
-        G = np.vstack([Jn, Dt])
-        W = G @ Minv @ G.T
-        F[b, : nc * (1 + k), : nc * (1 + k)] = W
-        F[b, nc : nc * (1 + k), nc * (1 + k) :] = E
-        F[b, nc * (1 + k) :, :nc] = 0.5 * np.eye(nc)
-        F[b, nc * (1 + k) :, nc : nc * (1 + k)] = -E.T
-        q[b, :nc] = Jn @ v + phi_h
-        q[b, nc : nc * (1 + k)] = Dt @ v
-    return F, q
-
-
 def independent_check(F: np.ndarray, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """(B,) the largest relative violation of each answer, recomputed from F, q and lam."""
     w = np.einsum("bij,bj->bi", F, lam) + q
@@ -688,18 +622,18 @@ def family_problems(cfg: Config) -> Iterator[tuple[str, int, np.ndarray, np.ndar
     """(family, d, F (n, d, d), q (n, d), on_bad_matrix) for every row of section 5."""
     n = max(3, cfg.n_problems // 3)
     for name, make in (
-        ("Csizmadia", csizmadia_problem),
-        ("Murty", murty_problem),
-        ("Fathy", fathy_problem),
+        ("Csizmadia", csizmadia),
+        ("Murty", murty),
+        ("Fathy", fathy),
     ):
         for d in FAMILY_DIMS:
-            F, q = make(d)
+            F, q, _ = make(d)
             yield name, d, F[None], q[None], "raise"
     for d in FAMILY_DIMS:  # the same matrices, harder right-hand sides
-        F = csizmadia_problem(d)[0]
+        F = csizmadia(d)[0]
         yield "Csizmadia, q = -1", d, F[None], -np.ones((1, d)), "raise"
     for d in FAMILY_DIMS:
-        F = csizmadia_problem(d)[0]
+        F = csizmadia(d)[0]
         q = rng_for(5, 8, d).standard_normal((n, d))
         yield "Csizmadia, random q", d, np.broadcast_to(F, (n, d, d)), q, "raise"
     for key, (name, make) in enumerate(

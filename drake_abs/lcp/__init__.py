@@ -1,5 +1,6 @@
 """The mu-softened linear complementarity problem: the batched primal-dual interior-point solver,
-its implicit-function-theorem Jacobians, the one-contact closed form and matrix classes.
+its implicit-function-theorem Jacobians, the one-contact closed form and matrix classes; and
+named hard LCPs for the tests and benchmarks (:mod:`drake_abs.lcp.problems`).
 
 Numbers only (numpy, scipy, numba); every other layer builds on this one.
 """

@@ -2,8 +2,9 @@
 
 Csizmadia's P-matrices (exponential handicap: the interior point alone diverges from d = 32),
 Murty's and Fathy's problems, non-symmetric P-matrices beyond the exact minor check (d > 10),
-and unsolvable problems that must stay flagged. Every answer the solver calls converged is
-verified here independently of the solver's own residual.
+and unsolvable problems that must stay flagged (the families: drake_abs.lcp.problems, shared
+with benchmarks/bench_lcp.py). Every answer the solver calls converged is verified here
+independently of the solver's own residual.
 """
 
 import warnings
@@ -14,46 +15,11 @@ from moby_reference import moby
 
 from drake_abs import LCPConvergenceError, LCPConvergenceWarning, LCPStatus, MatrixClass, solve_lcp
 from drake_abs.lcp import ipm
+from drake_abs.lcp.problems import csizmadia, fathy, murty, scaled_p_matrices
 
 #: Relative tolerance of the independent check (the solver's tol is 1e-12; the check recomputes
 #: w = F lam + q in the unscaled variables, so it allows the roundoff of that product).
 CHECK_TOL = 1e-10
-
-
-def csizmadia(d):
-    """Csizmadia's matrix (1 on the diagonal, -1 below, 0 above: lower triangular, a P-matrix
-    with every principal minor 1 and an exponential handicap) and a q whose solution is
-    x = (1, 0, 1, 0, ...) with w = (0, 1, 0, 1, ...)."""
-    F = 2.0 * np.eye(d) - np.tril(np.ones((d, d)))
-    x = (np.arange(d) % 2 == 0).astype(float)
-    q = 1.0 - x - F @ x
-    return F, q, x
-
-
-def murty(d):
-    """Murty's problem: 1 on the diagonal, 2 below; q = -1; solution e_1."""
-    F = np.eye(d) + 2.0 * np.tril(np.ones((d, d)), -1)
-    x = np.zeros(d)
-    x[0] = 1.0
-    return F, -np.ones(d), x
-
-
-def fathy(d):
-    """Fathy's problem: F = L L^T with L lower triangular (1 on the diagonal, 2 below),
-    positive definite; q = -1; solution e_1."""
-    L = np.eye(d) + 2.0 * np.tril(np.ones((d, d)), -1)
-    x = np.zeros(d)
-    x[0] = 1.0
-    return L @ L.T, -np.ones(d), x
-
-
-def scaled_p_matrix(rng, d):
-    """A non-symmetric P-matrix whose symmetric part is indefinite: D1 P D2 with P = A A^T / d
-    + 0.1 I + 0.3 (W - W^T) (positive definite symmetric part) and positive diagonal D1, D2
-    over two decades (a positive diagonal scaling keeps every principal minor's sign)."""
-    A, W = rng.normal(size=(2, d, d))
-    P = A @ A.T / d + 0.1 * np.eye(d) + 0.3 * (W - W.T)
-    return np.diag(10 ** rng.uniform(-1, 1, d)) @ P @ np.diag(10 ** rng.uniform(-1, 1, d))
 
 
 def assert_valid(F, q, lam, tol=CHECK_TOL):
@@ -121,7 +87,7 @@ def test_murty_and_fathy_problems(family, d):
 @pytest.mark.parametrize("d", [12, 24, 48])
 def test_non_psd_p_matrix_beyond_the_exact_check_is_not_refused(d):
     rng = np.random.default_rng(1000 + d)
-    F = scaled_p_matrix(rng, d)
+    F = scaled_p_matrices(rng, d, 1)[0]
     assert np.linalg.eigvalsh(F + F.T)[0] < 0  # not PSD: the old code refused it at d > 10
     q = rng.normal(size=(16, d))
     r = solve_lcp(F, q, 0.0)
