@@ -1,8 +1,9 @@
-"""The data of one batched rigid-body contact step
-(:func:`drake_abs.contact.contact_lcp.contact_step`), SI units throughout: its inputs, the
-dynamics of B states with their derivatives in p = (q, v, u) (:class:`StepQuantities`) and in
-the model parameters theta (:class:`ParameterDerivatives`), and its output
-(:class:`ContactStepResult`). Shapes are given in each class.
+"""The data of one batched rigid-body contact step, in SI units: its inputs and its result.
+
+The step is :func:`drake_abs.contact.contact_lcp.contact_step`. Its inputs are the dynamics of B
+states with their derivatives in p = (q, v, u) (:class:`StepQuantities`) and in the model
+parameters theta (:class:`ParameterDerivatives`); its output is a :class:`ContactStepResult`.
+Shapes are given in each class.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """The Stewart-Trinkle formulation of the rigid-body contact step (docs/math.md sections 6 and
-6b; the papers' equations): the normal, tangent and cone rows of a
-:class:`~drake_abs.contact.cone.FrictionCone` as one LCP ``s = F lam + z`` in
+6b; the papers' equations): the normal, tangent and cone rows of a friction cone as one LCP.
+
+The rows of a :class:`~drake_abs.contact.cone.FrictionCone` give ``s = F lam + z`` in
 ``lam = (gamma, beta, omega)``, with F (B, d, d) and z (B, d) as in the docstring of
 :mod:`drake_abs.contact.contact_lcp`: assembled (:func:`assemble_lcp`), then smoothed, solved
 (with the exact fallback), integrated and differentiated (:func:`stewart_trinkle_step`).
