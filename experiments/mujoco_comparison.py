@@ -29,7 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.engine import open_loop
+from drake_abs.engine.step_log import StepLog
 from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.multibody import build_scene_model
+from drake_abs.policy.controls import held_random_inputs
+from drake_abs.reference.drake_plant import DrakePlantStepper
+from drake_abs.reference.mujoco_plant import MujocoStepper
 
 NAME = "mujoco-comparison"
 SCENES = ("gym_hopper", "gym_half_cheetah")
@@ -79,163 +85,69 @@ def gym_asset(scene_name: str) -> Path:
     return Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets" / GYM_FILES[scene_name][0]
 
 
-def mujoco_model(scene_name: str, time_step: float):
-    """MuJoCo's model of the scene's file with the scene's time step, Euler, no joint springs.
-    Returns (model, gymnasium's control period frame_skip * file timestep)."""
-    import mujoco
-
-    model = mujoco.MjModel.from_xml_path(str(gym_asset(scene_name)))
-    gym_dt = float(model.opt.timestep) * GYM_FILES[scene_name][1]
-    model.opt.timestep = time_step
-    model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
-    model.jnt_stiffness[:] = 0.0
-    return model, gym_dt
-
-
-class _Geometry:
-    """Our contact points' signed gaps to the ground and the torso's height, for any q."""
-
-    def __init__(self, sm):
-        self.plant = sm.plant
-        self.ctx = self.plant.CreateDefaultContext()
-        self.nq = self.plant.num_positions()
-        self.scene = sm.scene
-        self.bodies = [self.plant.GetBodyByName(c.body) for c in sm.scene.contacts]
-        self.torso = self.plant.GetBodyByName("torso")
-
-    def gaps(self, q: np.ndarray) -> np.ndarray:
-        self.plant.SetPositions(self.ctx, q[: self.nq])
-        out = []
-        for body, c in zip(self.bodies, self.scene.contacts, strict=True):
-            X = self.plant.EvalBodyPoseInWorld(self.ctx, body)
-            for p in c.points:
-                z = (X @ np.asarray(p, float))[2]
-                out.append(z - (c.radius or 0.0) - self.scene.ground_height)
-        return np.asarray(out)
-
-    def torso_height(self, q: np.ndarray) -> float:
-        self.plant.SetPositions(self.ctx, q[: self.nq])
-        return float(self.plant.EvalBodyPoseInWorld(self.ctx, self.torso).translation()[2])
-
-
-def _controls(config: Config, scenario: str, steps: int, nu: int) -> np.ndarray:
-    """MuJoCo ctrl (steps, nu), in [-1, 1]."""
-    ctrl = np.zeros((steps, nu))
+def _ctrl(config: Config, scenario: str, steps: int, nu: int) -> np.ndarray:
+    """MuJoCo ctrl (steps, nu), in [-1, 1]: zero (drop), held random (open loop), or the last
+    motor's constant ``limit_ctrl`` (limit hit)."""
     if scenario == "open_loop":
-        rng = np.random.default_rng(config.seed)
-        blocks = rng.uniform(-config.ctrl_scale, config.ctrl_scale, (-(-steps // config.hold), nu))
-        ctrl = np.repeat(blocks, config.hold, axis=0)[:steps]
-    elif scenario == "limit_hit":
-        ctrl[:, -1] = config.limit_ctrl
+        return held_random_inputs(
+            steps, nu, scale=config.ctrl_scale, hold=config.hold, seed=config.seed
+        )
+    ctrl = np.zeros((steps, nu))
+    ctrl[:, -1] = config.limit_ctrl if scenario == "limit_hit" else 0.0
     return ctrl
 
 
-def run_ours(sm, x0, torques):
-    stepper = sm.stepper()
-    xs, imp, limp, conv = [x0], 0.0, 0.0, True
-    for u in torques:
-        r = stepper.step(xs[-1][None], u[None], jacobians=False)
-        xs.append(r.x_next[0])
-        imp += float(r.impulse.sum())
-        limp += float(np.abs(r.limit_impulse).sum()) if r.limit_impulse is not None else 0.0
-        conv &= bool(r.converged.all())
-    return {"x": np.array(xs), "impulse": imp, "limit_impulse": limp, "converged": conv}
-
-
-def run_mujoco(model, x0, ctrls):
+def _floor_penetration(model, states: np.ndarray) -> float:
+    """MuJoCo's deepest geom penetration (m) into the floor at these states (qpos first)."""
     import mujoco
 
     data = mujoco.MjData(model)
-    nq = model.nq
-    data.qpos[:] = x0[:nq]
-    data.qvel[:] = x0[nq:]
-    mujoco.mj_forward(model, data)
     floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
-    xs, imp, limp, pen = [x0.copy()], 0.0, 0.0, 0.0
-    f6 = np.zeros(6)
-    dt = model.opt.timestep
-    for c in ctrls:
-        data.ctrl[:] = c
-        mujoco.mj_step(model, data)
-        xs.append(np.concatenate([data.qpos, data.qvel]))
-        # forces of the step just taken (mj_step leaves them from its own forward pass)
-        for i in range(data.ncon):
-            con = data.contact[i]
-            if floor not in (con.geom1, con.geom2):
-                continue
-            pen = max(pen, -float(con.dist))
-            mujoco.mj_contactForce(model, data, i, f6)
-            imp += f6[0] * dt
-        limits = data.efc_type == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT
-        limp += float(np.abs(data.efc_force[limits]).sum()) * dt
-    return {"x": np.array(xs), "impulse": imp, "limit_impulse": limp, "penetration": pen}
-
-
-def run_sap(scene, x0, torques):
-    from pydrake.systems.analysis import Simulator
-
-    from drake_abs.reference.drake_twin import make_drake_twin
-
-    twin = make_drake_twin(scene, "sap")
-    sim = Simulator(twin.diagram)
-    ctx = sim.get_mutable_context()
-    pc = twin.plant.GetMyMutableContextFromRoot(ctx)
-    nq = twin.plant.num_positions()
-    twin.plant.SetPositions(pc, x0[:nq])
-    twin.plant.SetVelocities(pc, x0[nq:])
-    port = twin.diagram.get_input_port(0)
-    port.FixValue(ctx, torques[0])
-    sim.Initialize()
-    xs, imp = [x0.copy()], 0.0
-    for k, u in enumerate(torques):
-        port.FixValue(ctx, u)
-        sim.AdvanceTo((k + 1) * scene.time_step)
-        xs.append(twin.plant.GetPositionsAndVelocities(pc).copy())
-        results = twin.plant.get_contact_results_output_port().Eval(pc)
-        for i in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(i)
-            imp += abs(float(info.contact_force() @ info.point_pair().nhat_BA_W)) * scene.time_step
-    return {"x": np.array(xs), "impulse": imp}
+    deepest = 0.0
+    for x in states:
+        data.qpos[:] = x[: model.nq]
+        mujoco.mj_fwdPosition(model, data)  # the contacts mj_step finds at this state
+        c = data.contact
+        on_floor = (c.geom1 == floor) | (c.geom2 == floor)
+        deepest = max(deepest, float((-c.dist[on_floor]).max(initial=0.0)))
+    return deepest
 
 
 def _rms(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
-def gradient_check(sm, states: np.ndarray, torques: np.ndarray, eps: float = 1e-6) -> dict:
-    """Largest relative error of our dx+/dx, dx+/du against central differences of our step."""
-    stepper = sm.stepper()
-    nx = states.shape[1]
-    worst_x, worst_u = 0.0, 0.0
-    for x, u in zip(states, torques, strict=True):
-        r = stepper.step(x[None], u[None], jacobians=True)
-
-        def f(z, u=u):
-            return stepper.step(z[None, :nx], z[None, nx:], jacobians=False).x_next[0]
-
-        z = np.concatenate([x, u])
-        cols = []
-        for i in range(z.size):
-            e = np.zeros_like(z)
-            e[i] = eps
-            cols.append((f(z + e) - f(z - e)) / (2 * eps))
-        fd = np.stack(cols, axis=1)
-        scale = max(1.0, float(np.abs(fd).max()))
-        worst_x = max(worst_x, float(np.abs(r.dx_dx[0] - fd[:, :nx]).max()) / scale)
-        worst_u = max(worst_u, float(np.abs(r.dx_du[0] - fd[:, nx:]).max()) / scale)
-    return {"dx_dx_rel_err": worst_x, "dx_du_rel_err": worst_u}
+def gradient_check(stepper, states: np.ndarray, torques: np.ndarray, eps: float = 1e-6) -> dict:
+    """Largest relative error of our dx+/dx, dx+/du at (states (S, nx), torques (S, nu)) against
+    central differences of the same step (every perturbation in one batch)."""
+    (S, nx), n = states.shape, states.shape[1] + torques.shape[1]
+    z = np.concatenate([states, torques], axis=1)[None, :, None, :]
+    z = z + np.array([1.0, -1.0])[:, None, None, None] * eps * np.eye(n)  # (2, S, n, n)
+    r = stepper.step(states, torques, jacobians=True)
+    f = stepper.step(z[..., :nx].reshape(-1, nx), z[..., nx:].reshape(-1, n - nx), jacobians=False)
+    f = f.x_next.reshape(2, S, n, nx)
+    fd = ((f[0] - f[1]) / (2 * eps)).transpose(0, 2, 1)  # (S, nx, nx + nu)
+    scale = np.maximum(1.0, np.abs(fd).max(axis=(1, 2)))
+    return {
+        key: float((np.abs(J - fd[..., cols]).max(axis=(1, 2)) / scale).max())
+        for key, J, cols in (("dx_dx_rel_err", r.dx_dx, slice(None, nx)),
+                             ("dx_du_rel_err", r.dx_du, slice(nx, None)))
+    }  # fmt: skip
 
 
 def compare_scene(name: str, config: Config) -> dict:
-    from drake_abs.multibody import build_scene_model
+    import mujoco
 
     sm = build_scene_model(name)
-    scene = sm.scene
-    model, gym_dt = mujoco_model(name, scene.time_step)
-    gear = model.actuator_gear[:, 0].copy()
-    geom = _Geometry(sm)
-    nq = sm.plant.num_positions()
+    scene, plant, nq = sm.scene, sm.plant, sm.contact_model.nq
+    file_model = mujoco.MjModel.from_xml_path(str(gym_asset(name)))
+    gym_dt = float(file_model.opt.timestep) * GYM_FILES[name][1]
+    options = {"timestep": scene.time_step, "integrator": "Euler", "springs": False}
+    floor = mujoco.mj_name2id(file_model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    last = plant.get_joint_actuator(plant.GetJointActuatorIndices()[-1]).joint()
+    context, torso = plant.CreateDefaultContext(), plant.GetBodyByName("torso")
     x0 = np.asarray(sm.x0, float)
+    head = max(2, int(round(0.2 / scene.time_step)))
     row = {
         "scene": name,
         "time_step": scene.time_step,
@@ -246,50 +158,42 @@ def compare_scene(name: str, config: Config) -> dict:
     steps = {"drop": config.drop_steps, "open_loop": config.torque_steps}
     steps["limit_hit"] = config.limit_steps
     for scenario, n in steps.items():
-        ctrl = _controls(config, scenario, n, model.nu)
-        torques = ctrl * gear
-        ours = run_ours(sm, x0, torques)
-        mj = run_mujoco(model, x0, ctrl)
-        sides = {"ours": ours, "mujoco": mj}
+        ctrl = _ctrl(config, scenario, n, file_model.nu)
+        torques = ctrl * file_model.actuator_gear[:, 0]
+        sides = {"ours": (sm.stepper(), torques),
+                 "mujoco": (MujocoStepper(file_model, options=options), ctrl)}  # fmt: skip
         if config.sap:
-            sides["sap"] = run_sap(scene, x0, torques)
-        res = {}
-        for side, out in sides.items():
-            qs = out["x"][:, :nq]
-            gaps = np.array([geom.gaps(q) for q in qs])
-            entry = {
-                "final_torso_height": geom.torso_height(qs[-1]),
-                "final_root_x": float(qs[-1, 0]),
-                "max_point_penetration": float(max(0.0, -gaps.min())),
-                "normal_impulse_total": out["impulse"],
+            sides["sap"] = (DrakePlantStepper(scene, "sap"), torques)
+        res = row["scenarios"][scenario] = {}
+        for side, (stepper, u) in sides.items():
+            log = StepLog(stepper)
+            traj = open_loop(log, x0, u, jacobians=False, on_unconverged="flag")
+            qs = traj.x[0, :, :nq]
+            plant.SetPositions(context, qs[-1])
+            impulse = traj.impulse[0, :, [floor]] if side == "mujoco" else traj.impulse
+            e = {
+                "final_torso_height": plant.EvalBodyPoseInWorld(context, torso).translation()[2],
+                "final_root_x": qs[-1, 0],
+                "max_point_penetration": max(0.0, -sm.contact_model.distances(qs).min()),
+                "normal_impulse_total": impulse.sum(),
             }
             if side == "mujoco":
-                entry["max_geom_penetration"] = out["penetration"]
-            if "limit_impulse" in out:
-                entry["limit_impulse_total"] = out["limit_impulse"]
-            if "converged" in out:
-                entry["converged"] = out["converged"]
-            j = sm.plant.GetJointByName(_last_motor_joint(model))
-            entry["last_joint_max_over_upper"] = float(
-                (qs[:, j.position_start()] - j.position_upper_limits()[0]).max()
-            )
+                e["max_geom_penetration"] = _floor_penetration(stepper.model, traj.x[0, :-1])
+            if side != "sap":
+                e["limit_impulse_total"] = np.abs(log.stacked("limit_impulse")).sum()
+            if side == "ours":
+                e["converged"] = bool(traj.converged.all())
+                x_ours = traj.x[0]
+            upper = last.position_upper_limits()[0]
+            e["last_joint_max_over_upper"] = (qs[:, last.position_start()] - upper).max()
             if side != "ours":
-                entry["rms_q_vs_ours"] = _rms(qs, ours["x"][:, :nq])
-                head = max(2, int(round(0.2 / scene.time_step)))
-                entry["rms_q_vs_ours_first_0.2s"] = _rms(qs[:head], ours["x"][:head, :nq])
-            res[side] = entry
-        row["scenarios"][scenario] = res
+                e["rms_q_vs_ours"] = _rms(qs, x_ours[:, :nq])
+                e["rms_q_vs_ours_first_0.2s"] = _rms(qs[:head], x_ours[:head, :nq])
+            res[side] = {k: v if isinstance(v, bool) else float(v) for k, v in e.items()}
         if scenario == "open_loop" and config.gradient_states:
             idx = np.linspace(1, n - 1, config.gradient_states).astype(int)
-            row["gradient"] = gradient_check(sm, ours["x"][idx], torques[idx])
+            row["gradient"] = gradient_check(sm.stepper(), x_ours[idx], torques[idx])
     return row
-
-
-def _last_motor_joint(model) -> str:
-    import mujoco
-
-    jid = int(model.actuator_trnid[model.nu - 1, 0])
-    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, jid)
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:

@@ -1,12 +1,14 @@
 """Meshcat recordings of the robot and manipulation scenes under their controllers: one
 self-contained HTML page per recording, and what each rollout did.
 
-Recordings (each stepped by the scene's own stepper, exact contact unless the scene says
-otherwise; every step's ``converged`` flag counted):
+Recordings (each the scene's own stepper under its controller, a time-varying policy, in
+:func:`drake_abs.engine.rollout`; exact contact unless the scene says otherwise; every step's
+``converged`` flag counted):
 
 - ``gym_hopper``, ``gym_half_cheetah``: gymnasium's models as published, dropped and driven by
-  the seeded open-loop torque sequence of the MuJoCo comparison (held 5 steps each,
-  ctrl uniform in +-0.5 of the gear);
+  the seeded open-loop torque sequence of the MuJoCo comparison
+  (:func:`~drake_abs.policy.controls.held_random_inputs`: held 5 steps each, ctrl uniform in
+  +-0.5 of the gear);
 - ``solo12_standing``: Solo12 dropped onto its feet under the posture-holding feed-forward +
   PD (:func:`drake_abs.multibody.posture.standing_controller`);
 - ``solo12_stepping``: the same with its reference swung in a trot-like pattern
@@ -29,16 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs import engine
 from drake_abs.diagrams.scene_visualization import record_rollout_html
 from drake_abs.experiments._common import file_list, progress, results_dir
-from drake_abs.experiments.mujoco_comparison import Config as MujocoConfig
-from drake_abs.experiments.mujoco_comparison import _controls
 from drake_abs.multibody import build_scene_model
-from drake_abs.multibody.posture import (
-    SOLO12_TROT,
-    STANDING_GAINS,
-    stepping_controller,
-)
+from drake_abs.multibody.posture import SOLO12_TROT, STANDING_GAINS, stepping_controller
+from drake_abs.policy.controls import TimeVaryingController, held_random_inputs
 
 NAME = "scene-recordings"
 
@@ -67,36 +65,25 @@ class Config:
         return cls(duration=0.3)
 
 
-def _inputs(name: str, sm, push_offset: float = PUSH_OFFSET):
-    """``(x0, u(k, x))`` of a recording: the initial state and the input at step k."""
-    nu = sm.contact_model.nu
-    h = sm.scene.time_step
+def _controller(name: str, sm, steps: int, push_offset: float) -> tuple[np.ndarray, object]:
+    """``(x0, policy)`` of a recording: the initial state and its controller of (t, x)."""
+    plant, nq, h = sm.plant, sm.contact_model.nq, sm.scene.time_step
     x0 = np.asarray(sm.x0, float).copy()
-    if name.startswith("gym_"):
-        steps = 10_000
-        gear = _gear(sm)
-        torques = _controls(MujocoConfig(), "open_loop", steps, nu) * gear
-        return x0, lambda k, x: torques[k]
-    if name == "pusher_box":
+    nx, nu = x0.size, plant.num_actuators()
+    if name.startswith("gym_"):  # ctrl in [-1, 1] times the gear (the actuators' effort limits)
+        gear = [plant.get_joint_actuator(a).effort_limit() for a in plant.GetJointActuatorIndices()]
+        torques = held_random_inputs(steps, nu) * np.array(gear)
+        return x0, TimeVaryingController(lambda t, x: torques[t], nx, nu)
+    if name == "pusher_box":  # a velocity servo on the pusher's x, y
         x0[1] = push_offset  # the pusher's y against the box's centre line (y = 0)
-
-        def push(k, x):
-            nq = sm.contact_model.nq
-            return PUSH_GAIN * (np.array([PUSH_SPEED, 0.0]) - x[nq : nq + 2])
-
-        return x0, push
+        target = np.array([PUSH_SPEED, 0.0])
+        return x0, TimeVaryingController(
+            lambda t, x: PUSH_GAIN * (target - x[:, nq : nq + 2]), nx, nu
+        )
     feet, kp, kd = STANDING_GAINS[sm.scene.name]
     swing, phase, frequency = SOLO12_TROT if name == "solo12_stepping" else (0.0, 0.0, 0.0)
     drive = stepping_controller(sm, feet, kp, kd, swing, phase, frequency)
-    return x0, lambda k, x: drive(k * h, x)
-
-
-def _gear(sm) -> np.ndarray:
-    """The actuators' effort limits (N m): gymnasium's ctrl in [-1, 1] times the gear."""
-    plant = sm.plant
-    return np.array(
-        [plant.get_joint_actuator(a).effort_limit() for a in plant.GetJointActuatorIndices()]
-    )
+    return x0, TimeVaryingController(lambda t, x: drive(t * h, x), nx, nu)
 
 
 def rollout(
@@ -105,45 +92,29 @@ def rollout(
     """The recording's scene model, its states (T + 1, nx) and the number of unconverged
     steps."""
     sm = build_scene_model(RECORDINGS[name])
-    stepper = sm.stepper()
-    x, u_of = _inputs(name, sm, push_offset)
     steps = int(round(duration / sm.scene.time_step))
-    xs, unconverged = [x], 0
-    for k in range(steps):
-        r = stepper.step(xs[-1][None], np.asarray(u_of(k, xs[-1]), float)[None], jacobians=False)
-        unconverged += int((~r.converged).sum())
-        xs.append(r.x_next[0])
-    return sm, np.array(xs), unconverged
+    x0, policy = _controller(name, sm, steps, push_offset)
+    noise = np.zeros((1, steps, policy.nu))
+    traj = engine.rollout(sm.stepper(), policy, np.zeros(0), x0, noise, sigma=0.0,
+                          gradient=False, on_unconverged="flag")  # fmt: skip
+    return sm, traj.x[0], int((~traj.converged).sum())
 
 
 def _facts(name: str, sm, xs: np.ndarray) -> dict:
     """What the rollout did, from its states."""
-    model = sm.contact_model
-    nq = model.nq
-    depth = float(max(0.0, -model.distances(xs[:, :nq]).min()))
-    out = {"deepest_penetration_m": depth}
+    depth = float(max(0.0, -sm.contact_model.distances(xs[:, : sm.contact_model.nq]).min()))
     if name == "pusher_box":  # box x, y, z, yaw after the pusher's x, y
-        out.update(
-            box_displacement_m=[float(d) for d in xs[-1, 2:4] - xs[0, 2:4]],
-            box_yaw_rad=float(xs[-1, 5] - xs[0, 5]),
-        )
-    else:
-        z = _base_height(sm, xs)
-        out.update(base_height_start_m=float(z[0]), base_height_end_m=float(z[-1]))
-    return out
-
-
-def _base_height(sm, xs: np.ndarray) -> np.ndarray:
-    """The height (m) of the model's first body with mass (its base) over the rollout."""
-    plant = sm.plant
+        return {"deepest_penetration_m": depth,
+                "box_displacement_m": [float(d) for d in xs[-1, 2:4] - xs[0, 2:4]],
+                "box_yaw_rad": float(xs[-1, 5] - xs[0, 5])}  # fmt: skip
+    plant = sm.plant  # the height of the model's first body with mass (its base)
     context = plant.CreateDefaultContext()
-    body = plant.get_body(sm.contact_model._massive[0][1])
-    nq = plant.num_positions()
-    heights = []
-    for x in xs:
-        plant.SetPositions(context, x[:nq])
-        heights.append(plant.EvalBodyPoseInWorld(context, body).translation()[2])
-    return np.array(heights)
+    base = plant.GetBodyByName(sm.contact_model.massive_bodies[0])
+    z = []
+    for x in (xs[0], xs[-1]):
+        plant.SetPositions(context, x[: plant.num_positions()])
+        z.append(float(plant.EvalBodyPoseInWorld(context, base).translation()[2]))
+    return {"deepest_penetration_m": depth, "base_height_start_m": z[0], "base_height_end_m": z[1]}
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
