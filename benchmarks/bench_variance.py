@@ -1,7 +1,7 @@
 """Gradient-estimate variance per second of compute: FOPG-ABS against randomised smoothing (RS)
 (Zhang et al. 2023, section 5, "Discussion on BS and RS").
 
-The task is the hopping ball of :mod:`drake_abs.experiments.gradient_variance` (2-D point mass,
+The task is the hopping ball of :mod:`drake_abs.tasks.hopping_ball` (2-D point mass,
 h = 0.01 s, inelastic ground, action noise sigma = 1 N, the spring policy), at one horizon.
 Measured in the same run, at the same theta, with the same number of rollouts per estimate:
 
@@ -39,9 +39,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_ab
 import numpy as np  # noqa: E402
 
 from drake_abs.contact.smoothing import ContactAware, Exact  # noqa: E402
-from drake_abs.experiments.gradient_variance import hopping_ball, spring_theta  # noqa: E402
 from drake_abs.policy.estimators import first_order, randomized_smoothing  # noqa: E402
 from drake_abs.policy.gradient_stats import measure_variance  # noqa: E402
+from drake_abs.tasks.hopping_ball import hopping_ball, spring_theta  # noqa: E402
 
 
 def bench(horizon: int, samples: int, batches: int, rs_std: float, seed: int) -> dict:

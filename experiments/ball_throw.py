@@ -1,6 +1,5 @@
 """Zhang et al. 2023, section 8.3: learn the angle of a throw so that the ball ends up at a goal,
-with
-contact before the goal; learning curves of ZOPG, FOPG (exact), FOPG-BS and FOPG-ABS.
+with contact before the goal; learning curves of ZOPG, FOPG (exact), FOPG-BS and FOPG-ABS.
 
 The task (ours; the paper's Appendix C.2 illustration is not in the text we have): a ball of
 radius 5 cm and 1 kg is thrown from 1 m (its centre) at a fixed speed of 3 m/s; it lands
@@ -17,11 +16,14 @@ The throw fits the policy-gradient engine as a closed loop of H steps: the state
 ``speed (cos u, sin u)`` and from then on steps the ball's LCS, ignoring the input. So the
 exploration noise of later steps has no effect, and ZOPG's score reduces to the first step's.
 
-Estimators (drake_abs.policy.estimators), each trained with Adam from the same initial angle and the
-same five seeds: ZOPG (likelihood ratio on the exact model), FOPG on the exact model, FOPG-BS
-(one fixed mu) and FOPG-ABS (contact-aware mu). Every run is evaluated each iteration by the
-deterministic return (no exploration) of the exact model, the true objective; the curves are
-that evaluation against iterations and against simulated steps.
+Methods (names of :mod:`drake_abs.policy.methods`), each trained with Adam from the same initial
+angle and the same five seeds: ``zopg`` (likelihood ratio on the exact model), ``fopg_exact``,
+``fopg_bs`` (one fixed mu, ``bs_mu``) and ``fopg_abs`` (contact-aware mu). Every model's
+gradient is ``Config.gradient``: "frozen" (mu held, Zhang et al. 2023, Algorithm 1, the method
+this experiment reproduces). Every run is evaluated each iteration by the deterministic return
+(no exploration) of the exact model, the true objective; the curves are that evaluation against
+iterations and against simulated steps. ``summary.json`` and the run logs name the methods by
+their registry names (``fopg_abs``), the plots by their labels (``FOPG-ABS``).
 """
 
 from __future__ import annotations
@@ -35,19 +37,20 @@ from typing import ClassVar
 
 import numpy as np
 
-from drake_abs.contact.lcs import LcsStepper
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.lcs import GradientMode, LcsStepper
+from drake_abs.contact.smoothing import SmoothingPolicy
 from drake_abs.contact.step import Step
 from drake_abs.engine import rollout
 from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
-from drake_abs.policy.estimators import PolicyObjective, first_order, zeroth_order
+from drake_abs.policy.estimators import PolicyObjective
+from drake_abs.policy.methods import method
 from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.policy.training import Adam, train
 from drake_abs.tasks.box_lcs import TranslatingBox
 
 NAME = "ball-throw"
-METHODS = ("ZOPG", "FOPG", "FOPG-BS", "FOPG-ABS")
+METHODS = ("zopg", "fopg_exact", "fopg_bs", "fopg_abs")  # names of drake_abs.policy.methods
 
 #: The claims of Zhang et al. 2023, section 8.3, that this experiment sets ours beside (no
 #: numbers are given).
@@ -80,6 +83,7 @@ class Config:
     bs_mu: float = 1e-5
     abs_mu_max: float = 1e-3
     abs_length: float = 0.02
+    gradient: GradientMode = "frozen"  # Zhang et al. 2023, Algorithm 1
     methods: tuple[str, ...] = METHODS
     landscape_points: int = 301
 
@@ -166,19 +170,17 @@ def ball(config: Config) -> TranslatingBox:
     )  # fmt: skip
 
 
-def smoothing_for(method: str, config: Config) -> SmoothingPolicy:
-    """The contact smoothing of each method's model (ZOPG and FOPG: exact)."""
-    if method == "FOPG-BS":
-        return Fixed(config.bs_mu)
-    if method == "FOPG-ABS":
-        return ContactAware(mu_max=config.abs_mu_max, length=config.abs_length)
-    return Exact()
+def smoothing_for(name: str, config: Config) -> SmoothingPolicy:
+    """The contact smoothing of a method's model (``zopg`` and ``fopg_exact``: exact)."""
+    return method(name).smoothing_policy(
+        mu=config.bs_mu, contact_aware=(config.abs_mu_max, config.abs_length)
+    )
 
 
 def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> PolicyObjective:
-    """The throw as a :class:`PolicyObjective` on the model smoothed by ``smoothing``."""
-    # frozen mu: Zhang et al. 2023, Algorithm 1, the method this experiment reproduces
-    stepper = ThrowStepper(ball(config).stepper(smoothing, "frozen"), config.speed)
+    """The throw as a :class:`PolicyObjective` on the model smoothed by ``smoothing`` (default:
+    the ball's own, exact), with ``config.gradient``."""
+    stepper = ThrowStepper(ball(config).stepper(smoothing, config.gradient), config.speed)
     reward = QuadraticReward(
         Q=np.zeros((5, 5)), R=np.zeros((1, 1)), x_goal=np.array([config.goal, 0, 0, 0, 0]),
         Q_final=np.diag([1.0, 0, 0, 0, 0]),
@@ -187,39 +189,34 @@ def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> Polic
     return PolicyObjective(stepper, ThrowPolicy(), reward, x0, config.horizon, config.sigma)
 
 
+def _throws(obj: PolicyObjective, angles: np.ndarray, gradient: bool):
+    """One deterministic throw per angle: the angle enters as the first step's input (noise of
+    a zero policy), so the return's theta-derivative is its angle-derivative."""
+    noise = np.zeros((angles.size, obj.horizon, 1))
+    noise[:, 0, 0] = angles
+    x0 = np.tile(obj.x0, (angles.size, 1))
+    return rollout(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward, sigma=1.0,
+                   gradient=gradient)  # fmt: skip
+
+
 def true_return(config: Config, angles) -> tuple[np.ndarray, np.ndarray]:
     """Deterministic return and resting position p_x(T) of throws at ``angles`` (exact model)."""
-    angles = np.atleast_1d(np.asarray(angles, float))
-    obj = objective(config)
-    x0 = np.tile(obj.x0, (angles.size, 1))
-    # one rollout per angle: the angle enters as the first step's (zero-policy) input noise
-    noise = np.zeros((angles.size, config.horizon, 1))
-    noise[:, 0, 0] = angles
-    r = rollout(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
-                       sigma=1.0, gradient=False)  # fmt: skip
+    r = _throws(objective(config), np.atleast_1d(np.asarray(angles, float)), gradient=False)
     return r.returns, r.x[:, -1, 0]
 
 
 def landscape(config: Config, angles: np.ndarray) -> dict:
     """p_x(T) and its pathwise derivative over ``angles`` for the exact, BS and ABS models."""
     out = {}
-    for method in ("FOPG", "FOPG-BS", "FOPG-ABS"):
-        obj = objective(config, smoothing_for(method, config))
-        noise = np.zeros((angles.size, config.horizon, 1))
-        noise[:, 0, 0] = angles
-        x0 = np.tile(obj.x0, (angles.size, 1))
-        r = rollout(obj.stepper, obj.policy, np.zeros(1), x0, noise, obj.reward,
-                           sigma=1.0, gradient=True)  # fmt: skip
-        # dJ/dtheta at theta = 0 with u_0 = angle: the angle's derivative of the return
-        out[method] = {"p_final": r.x[:, -1, 0].tolist(), "dreturn_dangle": r.grad[:, 0].tolist()}
+    for name in ("fopg_exact", "fopg_bs", "fopg_abs"):
+        r = _throws(objective(config, smoothing_for(name, config)), angles, gradient=True)
+        out[name] = {"p_final": r.x[:, -1, 0].tolist(), "dreturn_dangle": r.grad[:, 0].tolist()}
     return out
 
 
-def _estimator(method: str, config: Config):
-    obj = objective(config, smoothing_for(method, config))
-    if method == "ZOPG":
-        return lambda th, rng: zeroth_order(obj, th, rng, config.rollouts)
-    return lambda th, rng: first_order(obj, th, rng, config.rollouts)
+def _estimator(name: str, config: Config):
+    obj = objective(config, smoothing_for(name, config))
+    return lambda th, rng: method(name).estimate(obj, th, rng, config.rollouts)
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
@@ -233,11 +230,11 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     curves, runs = {}, {}
     start_all = time.perf_counter()
     bar = progress(total=len(config.methods) * len(config.seeds), desc="ball-throw: training")
-    for method in config.methods:
-        estimator = _estimator(method, config)
+    for name in config.methods:
+        estimator = _estimator(name, config)
         evals, steps, unconverged, seconds, finals = [], [], 0, 0.0, []
         for seed in config.seeds:
-            bar.set_postfix_str(f"{method}, seed {seed}")
+            bar.set_postfix_str(f"{name}, seed {seed}")
             start = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted per row
@@ -245,8 +242,8 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                     estimator, np.array([config.angle0]), Adam(lr=config.learning_rate),
                     config.iterations, seed=seed,
                     evaluate=lambda th: float(true_return(config, th[0])[0][0]),
-                    log_dir=out / "runs", name=f"{method}_seed{seed}",
-                    config={"method": method, **asdict(config)}, progress=False,
+                    log_dir=out / "runs", name=f"{name}_seed{seed}",
+                    config={"method": name, **asdict(config)}, progress=False,
                 )  # fmt: skip
             seconds += time.perf_counter() - start
             rows = run_.rows
@@ -257,8 +254,8 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             finals.append(float(run_.theta[0]))
             bar.update()
         ev = np.array(evals)
-        curves[method] = {"eval_return": ev.tolist(), "simulated_steps": steps[0]}
-        runs[method] = {
+        curves[name] = {"eval_return": ev.tolist(), "simulated_steps": steps[0]}
+        runs[name] = {
             "final_return_mean": float(ev[:, -1].mean()),
             "final_return_std": float(ev[:, -1].std()),
             "final_returns": ev[:, -1].tolist(),
@@ -321,28 +318,19 @@ def _claims(runs: dict) -> dict:
                    for b in others)  # fmt: skip
 
     out = {}
-    if {"ZOPG", "FOPG", "FOPG-BS"} <= set(runs):
+    if {"zopg", "fopg_exact", "fopg_bs"} <= set(runs):
         out["bs_beats_zopg_and_fopg"] = {
             "paper": PAPER_CLAIMS["bs_beats_zopg_and_fopg"],
             "ours_final": final, "ours_auc": auc,
-            "agree": beats("FOPG-BS", ["ZOPG", "FOPG"]),
+            "agree": beats("fopg_bs", ["zopg", "fopg_exact"]),
         }  # fmt: skip
-    if "FOPG-ABS" in runs and len(runs) > 1:
+    if "fopg_abs" in runs and len(runs) > 1:
         out["abs_beats_all"] = {
             "paper": PAPER_CLAIMS["abs_beats_all"],
             "ours_final": final, "ours_auc": auc,
-            "agree": beats("FOPG-ABS", [m for m in runs if m != "FOPG-ABS"]),
+            "agree": beats("fopg_abs", [m for m in runs if m != "fopg_abs"]),
         }  # fmt: skip
     return out
-
-
-#: method -> its legend entry
-METHOD_LABELS = {
-    "ZOPG": "ZOPG (zeroth order, exact model)",
-    "FOPG": "FOPG (first order, exact model)",
-    "FOPG-BS": "FOPG, barrier smoothing",
-    "FOPG-ABS": "FOPG, adaptive (ABS)",
-}
 
 
 def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> dict[str, Path]:
@@ -352,13 +340,13 @@ def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> dic
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
-    for method, c in curves.items():
+    for name, c in curves.items():
         ev = np.array(c["eval_return"])
         mean, std = ev.mean(axis=0), ev.std(axis=0)
         for ax, xs in zip(
             axes, (np.arange(ev.shape[1]), np.array(c["simulated_steps"])), strict=True
         ):
-            ax.plot(xs, mean, label=METHOD_LABELS.get(method, method))
+            ax.plot(xs, mean, label=method(name).label)
             ax.fill_between(xs, mean - std, mean + std, alpha=0.2)
     axes[0].set(xlabel="iteration", ylabel="return  -(p_x(T) - goal)^2  (m^2)",
                 title=f"ball throw: mean and std over {len(config.seeds)} seeds")  # fmt: skip
@@ -372,11 +360,11 @@ def _plot(out: Path, config: Config, curves: dict, angles, p_final, land) -> dic
     files = {"learning_curves": out / "learning_curves.png"}
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
-    names = {"FOPG": "exact", "FOPG-BS": f"barrier smoothing, mu = {config.bs_mu:g}",
-             "FOPG-ABS": f"adaptive (ABS), mu_max = {config.abs_mu_max:g}"}  # fmt: skip
-    for method, data in land.items():
-        axes[0].plot(angles, data["p_final"], label=names[method])
-        axes[1].plot(angles, data["dreturn_dangle"], label=names[method])
+    names = {"fopg_exact": "exact", "fopg_bs": f"barrier smoothing, mu = {config.bs_mu:g}",
+             "fopg_abs": f"adaptive (ABS), mu_max = {config.abs_mu_max:g}"}  # fmt: skip
+    for name, data in land.items():
+        axes[0].plot(angles, data["p_final"], label=names[name])
+        axes[1].plot(angles, data["dreturn_dangle"], label=names[name])
     axes[0].axhline(config.goal, color="k", ls=":", label="goal")
     axes[0].set(xlabel="throwing angle (rad)", ylabel="resting position p_x(T) (m)",
                 title="where the ball stops")  # fmt: skip
@@ -400,7 +388,8 @@ def report(summary: dict) -> str:
     for m, r in summary["methods"].items():
         its = r["iterations_to_threshold"]
         lines.append(
-            f"  {m:9s} final {r['final_return_mean']:+.2e} +- {r['final_return_std']:.1e}, "
+            f"  {method(m).label:9s} final {r['final_return_mean']:+.2e} +- "
+            f"{r['final_return_std']:.1e}, "
             f"angle {r['final_angle_mean']:.3f} +- {r['final_angle_std']:.3f} rad, "
             f"iterations to -1e-2: {'never (some seed)' if its is None else f'{its:.1f}'}, "
             f"unconverged steps {r['unconverged_steps']}, {r['seconds']:.1f} s"

@@ -7,7 +7,7 @@ of the point-mass family, and a small version runs on our planar half-cheetah sc
 (``drake_abs/scenes/half_cheetah.yaml``, rigid-body ``ComplementarityStepper``), whose step costs
 about a millisecond per sample in Python:
 
-- ``hopping_ball``: the hopping ball of :mod:`drake_abs.experiments.gradient_variance` (2-D point
+- ``hopping_ball``: the hopping ball of :mod:`drake_abs.tasks.hopping_ball` (2-D point
   mass, h = 0.01 s, inelastic ground, Gaussian action noise sigma = 1 N), starting from the
   hopping spring policy; the reward asks for p = (0.5, 0.2) m (and a little effort), so the ball
   must stop hopping, move sideways and hold a height 0.2 m above the ground. Linear policy
@@ -57,6 +57,7 @@ from drake_abs.policy.gradient_stats import measure_bias, measure_variance, refe
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.policy.training import Adam, train
+from drake_abs.tasks.hopping_ball import hopping_ball, spring_theta
 
 NAME = "bias-return"
 TASKS = ("hopping_ball", "half_cheetah", "gym_half_cheetah")
@@ -173,63 +174,59 @@ class Config:
 
 
 class Task:
-    """A training task: ``objective(smoothing, horizon)`` and the initial ``theta0``."""
+    """A training task: ``objective(smoothing, horizon)`` (the rollouts of training use the
+    design's own dynamics with the frozen gradient, Zhang et al. 2023, Algorithm 1) and the
+    initial ``theta0``."""
 
     def __init__(self, name: str):
         if name not in TASKS:
             raise ValueError(f"task must be one of {TASKS}; got {name!r}")
         self.name = name
         if name == "hopping_ball":
-            from drake_abs import point_mass_lcs
-            from drake_abs.contact.lcs import LcsStepper
-            from drake_abs.experiments.gradient_variance import TIME_STEP, spring_theta
-
-            lcs = point_mass_lcs(2, time_step=TIME_STEP)
-            self._stepper = lambda s: LcsStepper(lcs, s, "frozen")  # Zhang et al. 2023, Algorithm 1
-            self.policy = LinearPolicy(4, 2)
-            self.reward = QuadraticReward(
-                Q=np.diag([1.0, 1.0, 0.0, 0.0]),
-                R=1e-4 * np.eye(2),
-                x_goal=np.array([0.5, 0.2, 0.0, 0.0]),
+            # stop hopping, move sideways to p = (0.5, 0.2) m, a little effort
+            reward = QuadraticReward(Q=np.diag([1.0, 1.0, 0.0, 0.0]), R=1e-4 * np.eye(2),
+                                     x_goal=np.array([0.5, 0.2, 0.0, 0.0]))  # fmt: skip
+            self.objective = lambda smoothing, horizon: hopping_ball(
+                smoothing, "frozen", horizon, 1.0, reward=reward, x0=(0.0, 0.3, 0.0, 0.0)
             )
-            self.x0 = np.array([0.0, 0.3, 0.0, 0.0])
             self.theta0 = spring_theta()
-            self.sigma = 1.0
         elif name == "gym_half_cheetah":
             from drake_abs.tasks.locomotion import locomotion_task
 
-            task = locomotion_task("half_cheetah")
-            self._stepper = lambda s: (
-                locomotion_task("half_cheetah", smoothing=s, gradient="frozen").stepper
-            )
-            self.policy = task.policy(LinearPolicy(task.n_obs, task.nu))
-            self.reward = task.reward
-            self.x0 = task.x0
-            self.theta0 = np.zeros(self.policy.n_params)
-            self.sigma = 0.1  # action units (actions in [-1, 1])
+            def objective(smoothing, horizon):
+                task = locomotion_task("half_cheetah", smoothing=smoothing, gradient="frozen")
+                # sigma in action units (actions in [-1, 1])
+                return task.objective(LinearPolicy(task.n_obs, task.nu), horizon, 0.1)
+
+            self.objective = objective
+            self.theta0 = np.zeros(objective(None, 1).policy.n_params)
         else:
-            from drake_abs.multibody import build_scene_model
+            self.objective, self.theta0 = _scene_half_cheetah()
 
-            model = build_scene_model("half_cheetah")
-            self._stepper = lambda s: model.stepper(smoothing=s, gradient="frozen")
-            nq, nv = len(model.q0), len(model.v0)
-            nu = model.plant.num_actuators()
-            self.x0 = np.concatenate([model.q0, model.v0])
-            goal = self.x0.copy()
-            goal[nq] = 1.0  # forward speed, m/s
-            weights = np.zeros(nq + nv)
-            weights[[1, 2, nq]] = (10.0, 1.0, 1.0)  # height, pitch, forward speed
-            self.policy = LinearPolicy(nq + nv, nu, x_ref=tuple(self.x0))
-            self.reward = QuadraticReward(Q=np.diag(weights), R=1e-3 * np.eye(nu), x_goal=goal)
-            self.theta0 = np.zeros(self.policy.n_params)
-            # N m; with 1 N m (the ball's value) the zero policy's light feet spin at ~80 rad/s
-            # and the first Adam steps drove the state to inf (measured; reported in the notes)
-            self.sigma = 0.3
 
-    def objective(self, smoothing: SmoothingPolicy, horizon: int) -> PolicyObjective:
-        return PolicyObjective(
-            self._stepper(smoothing), self.policy, self.reward, self.x0, horizon, self.sigma
-        )
+def _scene_half_cheetah():
+    """Our planar half-cheetah scene: track v_x = 1 m/s keeping the torso's height and pitch,
+    linear feedback around the standing posture, zero at the start."""
+    from drake_abs.multibody import build_scene_model
+
+    model = build_scene_model("half_cheetah")
+    nq, nv = len(model.q0), len(model.v0)
+    nu = model.plant.num_actuators()
+    x0 = np.concatenate([model.q0, model.v0])
+    goal = x0.copy()
+    goal[nq] = 1.0  # forward speed, m/s
+    weights = np.zeros(nq + nv)
+    weights[[1, 2, nq]] = (10.0, 1.0, 1.0)  # height, pitch, forward speed
+    policy = LinearPolicy(nq + nv, nu, x_ref=tuple(x0))
+    reward = QuadraticReward(Q=np.diag(weights), R=1e-3 * np.eye(nu), x_goal=goal)
+
+    def objective(smoothing, horizon):
+        # sigma in N m; with 1 N m (the ball's value) the zero policy's light feet spin at ~80
+        # rad/s and the first Adam steps drove the state to inf (measured; reported in the notes)
+        stepper = model.stepper(smoothing=smoothing, gradient="frozen")
+        return PolicyObjective(stepper, policy, reward, x0, horizon, 0.3)
+
+    return objective, np.zeros(policy.n_params)
 
 
 def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, seed: int) -> dict:

@@ -14,7 +14,6 @@ import pytest
 
 from drake_abs import Exact, Fixed
 from drake_abs.contact.lcs import LCS, LcsStepper
-from drake_abs.experiments.gradient_variance import hopping_ball, spring_theta
 from drake_abs.policy.estimators import GradientEstimate, PolicyObjective, first_order
 from drake_abs.policy.gradient_stats import (
     fopg,
@@ -26,6 +25,7 @@ from drake_abs.policy.gradient_stats import (
 )
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.tasks.hopping_ball import hopping_ball, spring_theta
 
 C0, GOAL, Q, SIGMA = 0.5, 2.0, 3.0, 0.7  # x0, target, terminal weight, action noise
 
