@@ -1,20 +1,13 @@
 """Zhang et al. 2023, section 8.3: learn the angle of a throw so that the ball ends up at a goal,
 with contact before the goal; learning curves of ZOPG, FOPG (exact), FOPG-BS and FOPG-ABS.
 
-The task (ours; the paper's Appendix C.2 illustration is not in the text we have): a ball of
-radius 5 cm and 1 kg is thrown from 1 m (its centre) at a fixed speed of 3 m/s; it lands
-inelastically on ground with Coulomb friction 0.4, slides and stops. The ball translates only
-(it is :class:`~drake_abs.tasks.box_lcs.TranslatingBox`: it slides, it does not roll). The policy is
-the throwing angle theta (rad above the horizontal); exploration is Gaussian on the angle,
-``a = theta + sigma xi``. The return is ``-(p_x(T) - goal)^2`` (m^2) at the end of the horizon,
-when the ball has come to rest; every throw lands well before the goal, so the contact (the
-landing impulse and the friction of the slide) decides where it stops.
-
-The throw fits the policy-gradient engine as a closed loop of H steps: the state carries a
-``held`` flag, 1 until the ball is released. :class:`ThrowPolicy` outputs ``theta * held``;
-:class:`ThrowStepper` releases the ball at the first step with velocity
-``speed (cos u, sin u)`` and from then on steps the ball's LCS, ignoring the input. So the
-exploration noise of later steps has no effect, and ZOPG's score reduces to the first step's.
+The task (ours; the paper's Appendix C.2 illustration is not in the text we have),
+:mod:`drake_abs.tasks.ball_throw`: a ball of radius 5 cm and 1 kg is thrown from 1 m (its
+centre) at a fixed speed of 3 m/s; it lands inelastically on ground with Coulomb friction 0.4,
+slides (it translates only) and stops. The policy is the throwing angle; the return is
+``-(p_x(T) - goal)^2`` (m^2) at the end of the horizon, when the ball has come to rest; every
+throw lands well before the goal, so the contact (the landing impulse and the friction of the
+slide) decides where it stops.
 
 Methods (names of :mod:`drake_abs.policy.methods`), each trained with Adam from the same initial
 angle and the same five seeds: ``zopg`` (likelihood ratio on the exact model), ``fopg_exact``,
@@ -33,21 +26,18 @@ import time
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import ClassVar
 
 import numpy as np
 
-from drake_abs.contact.lcs import GradientMode, LcsStepper
+from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import SmoothingPolicy
-from drake_abs.contact.step import Step
 from drake_abs.engine import rollout
 from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.policy.methods import method
-from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.policy.training import Adam, train
-from drake_abs.tasks.box_lcs import TranslatingBox
+from drake_abs.tasks.ball_throw import throw_objective
 
 NAME = "ball-throw"
 METHODS = ("zopg", "fopg_exact", "fopg_bs", "fopg_abs")  # names of drake_abs.policy.methods
@@ -92,84 +82,6 @@ class Config:
         return cls(rollouts=8, iterations=12, learning_rate=0.03, seeds=(0, 1), landscape_points=41)
 
 
-@dataclass(frozen=True)
-class ThrowPolicy:
-    """``u = theta_0 * held``: the throwing angle while the ball is held, 0 afterwards.
-
-    State (5,): (p_x, p_z, v_x, v_z, held); one parameter, the angle (rad)."""
-
-    nx: int = 5
-    nu: int = 1
-    n_params: int = 1
-
-    def act(self, theta, x) -> np.ndarray:
-        return np.asarray(theta, float)[0] * np.asarray(x, float)[:, 4:5]
-
-    def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
-        x = np.asarray(x, float)
-        du_dx = np.zeros((len(x), 1, 5))
-        du_dx[:, 0, 4] = np.asarray(theta, float)[0]
-        return du_dx, x[:, None, 4:5].copy()
-
-    def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
-        x = np.asarray(x, float)
-        g_u = np.asarray(g_u, float)
-        g_x = np.zeros((len(x), 5))
-        g_x[:, 4] = g_u[:, 0] * np.asarray(theta, float)[0]
-        return g_x, g_u * x[:, 4:5]
-
-
-@dataclass(frozen=True)
-class ThrowStepper:
-    """Releases a held ball at angle u with ``speed`` (m/s), then steps the ball's LCS.
-
-    State (M, 5) = (p_x, p_z, v_x, v_z, held); input (M, 1) = the angle, read only while held.
-    The release step moves nothing else: p+ = p, v+ = speed (cos u, sin u), held+ = 0."""
-
-    ball: LcsStepper
-    speed: float
-
-    parameter_names: ClassVar[tuple[str, ...]] = ()
-
-    def step(
-        self, x: np.ndarray, u: np.ndarray, *, jacobians: bool = True, parameters: bool = False
-    ) -> Step:
-        if parameters:
-            raise ValueError("parameters=True: ThrowStepper names no model parameters")
-        M = x.shape[0]
-        held = x[:, 4] > 0.5
-        x_next = np.zeros((M, 5))
-        conv = np.ones(M, dtype=bool)
-        nc = self.ball.lcs.dims[2]
-        impulse, mu, iterations = np.zeros((M, nc)), np.zeros((M, nc)), np.zeros(M, np.int64)
-        dx_dx = np.zeros((M, 5, 5)) if jacobians else None
-        dx_du = np.zeros((M, 5, 1)) if jacobians else None
-        a = u[held, 0]
-        x_next[held, :2] = x[held, :2]
-        x_next[held, 2] = self.speed * np.cos(a)
-        x_next[held, 3] = self.speed * np.sin(a)
-        free = ~held
-        if free.any():
-            r = self.ball.step(x[free, :4], np.zeros((int(free.sum()), 1)), jacobians=jacobians)
-            x_next[free, :4] = r.x_next
-            conv[free] = r.converged
-            impulse[free], mu[free], iterations[free] = r.impulse, r.mu, r.iterations
-            if jacobians:
-                dx_dx[free, :4, :4] = r.dx_dx
-        if jacobians and held.any():
-            dx_dx[held, 0, 0] = dx_dx[held, 1, 1] = 1.0
-            dx_du[held, 2, 0] = -self.speed * np.sin(a)
-            dx_du[held, 3, 0] = self.speed * np.cos(a)
-        return Step(x_next, conv, iterations, impulse, mu, dx_dx=dx_dx, dx_du=dx_du)
-
-
-def ball(config: Config) -> TranslatingBox:
-    return TranslatingBox(
-        mass=config.mass, half_height=config.radius, friction=config.friction,
-        time_step=config.time_step,
-    )  # fmt: skip
-
-
 def smoothing_for(name: str, config: Config) -> SmoothingPolicy:
     """The contact smoothing of a method's model (``zopg`` and ``fopg_exact``: exact)."""
     return method(name).smoothing_policy(
@@ -178,15 +90,11 @@ def smoothing_for(name: str, config: Config) -> SmoothingPolicy:
 
 
 def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> PolicyObjective:
-    """The throw as a :class:`PolicyObjective` on the model smoothed by ``smoothing`` (default:
-    the ball's own, exact), with ``config.gradient``."""
-    stepper = ThrowStepper(ball(config).stepper(smoothing, config.gradient), config.speed)
-    reward = QuadraticReward(
-        Q=np.zeros((5, 5)), R=np.zeros((1, 1)), x_goal=np.array([config.goal, 0, 0, 0, 0]),
-        Q_final=np.diag([1.0, 0, 0, 0, 0]),
-    )  # fmt: skip
-    x0 = np.array([0.0, config.height, 0.0, 0.0, 1.0])
-    return PolicyObjective(stepper, ThrowPolicy(), reward, x0, config.horizon, config.sigma)
+    """The throw (:func:`~drake_abs.tasks.ball_throw.throw_objective`) with the config's sizes
+    and ``config.gradient``, on the model smoothed by ``smoothing`` (default: exact)."""
+    sizes = ("height", "speed", "radius", "mass", "friction", "time_step", "horizon", "goal",
+             "sigma")  # fmt: skip
+    return throw_objective(smoothing, config.gradient, **{k: getattr(config, k) for k in sizes})
 
 
 def _throws(obj: PolicyObjective, angles: np.ndarray, gradient: bool):

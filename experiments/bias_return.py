@@ -93,84 +93,33 @@ class TrainingSize:
 class Config:
     """One :class:`TrainingSize` per task (None skips the task)."""
 
-    hopping_ball: TrainingSize | None = field(
-        default_factory=lambda: TrainingSize(
-            iterations=60,
-            seeds=(0, 1, 2, 3),
-            samples=32,
-            horizon=150,
-            learning_rate=1.0,
-            checkpoints=(0, 15, 30, 60),
-            bias_batches=16,
-            reference_samples=4096,
-            reference_batches=16,
-            eval_rollouts=256,
-            eval_every=3,
-        )  # fmt: skip
-    )
-    half_cheetah: TrainingSize | None = field(
-        default_factory=lambda: TrainingSize(
-            iterations=20,
-            seeds=(0, 1),
-            samples=8,
-            horizon=40,
-            learning_rate=0.05,
-            checkpoints=(0, 20),
-            bias_batches=6,
-            reference_samples=96,
-            reference_batches=6,
-            eval_rollouts=16,
-            eval_every=5,
-        )  # fmt: skip
-    )
-    gym_half_cheetah: TrainingSize | None = field(
-        default_factory=lambda: TrainingSize(
-            iterations=30,
-            seeds=(0, 1, 2),
-            samples=16,
-            horizon=60,
-            learning_rate=0.01,
-            checkpoints=(0, 15, 30),
-            bias_batches=8,
-            reference_samples=512,
-            reference_batches=8,
-            eval_rollouts=32,
-            eval_every=3,
-        )  # fmt: skip
-    )
+    hopping_ball: TrainingSize | None = field(default_factory=lambda: TrainingSize(
+        iterations=60, seeds=(0, 1, 2, 3), samples=32, horizon=150, learning_rate=1.0,
+        checkpoints=(0, 15, 30, 60), bias_batches=16, reference_samples=4096,
+        reference_batches=16, eval_rollouts=256, eval_every=3))  # fmt: skip
+    half_cheetah: TrainingSize | None = field(default_factory=lambda: TrainingSize(
+        iterations=20, seeds=(0, 1), samples=8, horizon=40, learning_rate=0.05,
+        checkpoints=(0, 20), bias_batches=6, reference_samples=96, reference_batches=6,
+        eval_rollouts=16, eval_every=5))  # fmt: skip
+    gym_half_cheetah: TrainingSize | None = field(default_factory=lambda: TrainingSize(
+        iterations=30, seeds=(0, 1, 2), samples=16, horizon=60, learning_rate=0.01,
+        checkpoints=(0, 15, 30), bias_batches=8, reference_samples=512, reference_batches=8,
+        eval_rollouts=32, eval_every=3))  # fmt: skip
     eval_seed: int = 12345
 
     @classmethod
     def test_size(cls) -> Config:
         return cls(
             hopping_ball=TrainingSize(
-                iterations=4,
-                seeds=(0, 1),
-                samples=8,
-                horizon=60,
-                learning_rate=1.0,
-                checkpoints=(0, 4),
-                bias_batches=4,
-                reference_samples=128,
-                reference_batches=4,
-                eval_rollouts=16,
-                eval_every=2,
-            ),  # fmt: skip
+                iterations=4, seeds=(0, 1), samples=8, horizon=60, learning_rate=1.0,
+                checkpoints=(0, 4), bias_batches=4, reference_samples=128, reference_batches=4,
+                eval_rollouts=16, eval_every=2),
             half_cheetah=None,
             gym_half_cheetah=TrainingSize(
-                iterations=2,
-                seeds=(0,),
-                samples=4,
-                horizon=6,
-                learning_rate=0.01,
-                checkpoints=(0, 2),
-                bias_batches=2,
-                reference_samples=16,
-                reference_batches=2,
-                eval_rollouts=4,
-                eval_every=1,
-            ),  # fmt: skip
-        )
+                iterations=2, seeds=(0,), samples=4, horizon=6, learning_rate=0.01,
+                checkpoints=(0, 2), bias_batches=2, reference_samples=16, reference_batches=2,
+                eval_rollouts=4, eval_every=1),
+        )  # fmt: skip
 
 
 class Task:

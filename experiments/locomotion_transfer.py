@@ -3,24 +3,27 @@
 What a user does with a policy trained on our plant is to run it in gymnasium's ``Hopper-v5`` or
 ``HalfCheetah-v5``. For each task, every policy is evaluated deterministically (no exploration
 noise) from the reset states of several seeds (gymnasium's reset noise; the same seed gives the
-same start state in all three) for at most ``steps`` steps, in three settings:
+same start state in all three) for at most ``steps`` steps, in three settings, each in the
+engine (:func:`drake_abs.tasks.episodes.score_episodes`: gymnasium v5's reward at the setting's
+control period, its observation and healthy termination, from the task):
 
-- **(a) ours**: :class:`~drake_abs.tasks.gym_env.DrakeAbsEnv`, our plant with exact (hard,
-  complementarity) contact, one 0.01 s step per action, gymnasium v5's reward, observation and
-  healthy termination;
-- **(b) MuJoCo, gymnasium's defaults**: ``gymnasium.make("Hopper-v5")`` /
-  ``gymnasium.make("HalfCheetah-v5")`` as they come (soft contact; the Hopper acts every 4 x 2 ms
-  = 8 ms with RK4, the HalfCheetah every 5 x 10 ms = 50 ms with Euler), gymnasium computing the
-  reward and termination itself;
-- **(c) MuJoCo at our control period**: the same environment made with ``frame_skip`` such that
-  ``frame_skip * model.opt.timestep`` = our time step (the file's timestep is read, not assumed:
-  Hopper 0.002 s -> 5, HalfCheetah 0.01 s -> 1).
+- **(a) ours**: our plant with exact (hard, complementarity) contact, one 0.01 s step per
+  action, from the reset states :class:`~drake_abs.tasks.gym_env.DrakeAbsEnv` draws;
+- **(b) MuJoCo, gymnasium's defaults**: the MuJoCo model of ``gymnasium.make("Hopper-v5")`` /
+  ``gymnasium.make("HalfCheetah-v5")`` stepped as the environment steps it
+  (:meth:`~drake_abs.reference.mujoco_plant.MujocoStepper.from_gymnasium`; soft contact; the
+  Hopper acts every 4 x 2 ms = 8 ms with RK4, the HalfCheetah every 5 x 10 ms = 50 ms with
+  Euler), from gymnasium's own ``reset(seed=...)`` states; the returns are those of gymnasium's
+  ``env.step`` loop (to rounding: gymnasium adds the reward's terms in another order);
+- **(c) MuJoCo at our control period**: the same with ``frame_skip`` such that ``frame_skip *
+  model.opt.timestep`` = our time step (the file's timestep is read, not assumed: Hopper 0.002 s
+  -> 5, HalfCheetah 0.01 s -> 1).
 
 (c) - (b) isolates the control period; (a) - (c) the simulator (contact model, integrator, the
 modelling our scenes state: the HalfCheetah's joint springs are dropped on our side); the
-reward's terms (forward, control, survive) show where a difference comes from. The policy sees
-gymnasium's own observation in (b) and (c) (a policy of the observation, as saved for a task),
-or the full state (qpos, qvel) for a full-state policy.
+reward's terms (forward, control, survive) show where a difference comes from. A policy of the
+observation (as saved for a task) sees gymnasium's observation of the state, a full-state policy
+the state (qpos, qvel); actions are not clipped (see the explanation of the control cost).
 
 Policies come from ``Config.policies`` (a folder of saved policies, ``STEM.json`` + ``STEM.npz``
 as :func:`drake_abs.policy.saving.save_policy` writes them, e.g. ``results/locomotion/policies``),
@@ -42,7 +45,6 @@ import csv
 import json
 import time
 import warnings
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -60,10 +62,6 @@ SETTINGS = {
 }
 SMOOTHINGS = ("abs", "scene")
 REFERENCE = "zero action"
-
-#: The signature of an actor, which maps gymnasium's observation (n_obs,) and the full state
-#: (nx,) to an action (nu,).
-Actor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -135,138 +133,6 @@ class Config:
             raise ValueError(f"learning_rate must be > 0; got {self.learning_rate!r}")
 
 
-# ------------------------------------------------------------------------------------- actors
-
-
-def actor_of(saved) -> Actor:
-    """The actor of a :class:`~drake_abs.policy.saving.SavedPolicy`: a policy saved for the
-    task's observation acts on gymnasium's observation (``inner.act(theta, o)``), any other on
-    the full state x = (qpos, qvel)."""
-    theta = saved.theta
-    if saved.acts_on == "observation":
-        inner = saved.inner
-        return lambda obs, state: inner.act(theta, np.asarray(obs, float)[None])[0]
-    policy = saved.policy
-    return lambda obs, state: policy.act(theta, np.asarray(state, float)[None])[0]
-
-
-def zero_actor(nu: int) -> Actor:
-    """The zero action (nu,) whatever the observation."""
-    return lambda obs, state: np.zeros(nu)
-
-
-# --------------------------------------------------------------------------------- evaluation
-
-
-def _episode(env, actor: Actor, seed: int, steps: int, state: Callable[[], np.ndarray]) -> dict:
-    """One episode of at most ``steps`` steps from ``reset(seed=seed)``: return, length (steps
-    and seconds), forward distance (m) and velocity (m/s), the reward's terms, terminated, the
-    actions' RMS and the fraction of action entries beyond [-1, 1] (saturated motors)."""
-    obs, _ = env.reset(seed=seed)
-    x_start = float(state()[0])
-    total, length, terminated, unconverged = 0.0, 0, False, 0
-    actions = []
-    terms = {"reward_forward": 0.0, "reward_ctrl": 0.0, "reward_survive": 0.0}
-    dt = float(env.unwrapped.dt)
-    for _ in range(steps):
-        action = np.asarray(actor(obs, state()), dtype=float)
-        actions.append(action)
-        obs, reward, terminated, truncated, info = env.step(action)
-        total += float(reward)
-        length += 1
-        for key in terms:
-            terms[key] += float(info.get(key, 0.0))
-        unconverged += not info.get("converged", True)  # ours only: the contact solve's flag
-        if terminated or truncated:
-            break
-    distance = float(state()[0]) - x_start
-    seconds = length * dt
-    return {
-        "seed": int(seed), "return": total, "length": length, "seconds": seconds,
-        "forward_distance": distance, "forward_velocity": distance / seconds,
-        "terminated": bool(terminated), "unconverged_steps": int(unconverged), **terms,
-        "action_rms": float(np.sqrt(np.mean(np.square(actions)))),
-        "saturated_fraction": float(np.mean(np.abs(actions) > 1.0)),
-    }  # fmt: skip
-
-
-def evaluate_ours(task, actor: Actor, seeds, steps: int) -> list[dict]:
-    """Setting (a): episodes on our plant, :class:`~drake_abs.tasks.gym_env.DrakeAbsEnv` of
-    ``task`` (a :class:`~drake_abs.tasks.locomotion.LocomotionTask`), one per seed."""
-    from drake_abs.tasks.gym_env import DrakeAbsEnv
-
-    env = DrakeAbsEnv(task, max_episode_steps=steps)
-    return [_episode(env, actor, s, steps, lambda: env.state) for s in seeds]
-
-
-def make_gymnasium(env_id: str, steps: int, frame_skip: int | None = None):
-    """``gymnasium.make(env_id)`` with gymnasium's defaults (the episode's time limit set to
-    ``steps``), or with ``frame_skip`` given."""
-    import gymnasium
-
-    options = {} if frame_skip is None else {"frame_skip": int(frame_skip)}
-    return gymnasium.make(env_id, max_episode_steps=steps, **options)
-
-
-def evaluate_gymnasium(env, actor: Actor, seeds, steps: int) -> list[dict]:
-    """Settings (b) and (c): episodes in a gymnasium MuJoCo environment (reward, termination and
-    time limit all gymnasium's), one per seed; the state is MuJoCo's (qpos, qvel)."""
-    data = env.unwrapped.data
-
-    def state() -> np.ndarray:
-        return np.concatenate([data.qpos, data.qvel])
-
-    return [_episode(env, actor, s, steps, state) for s in seeds]
-
-
-def same_period_frame_skip(env_id: str, time_step: float) -> dict:
-    """gymnasium's MuJoCo settings of ``env_id`` and the ``frame_skip`` whose control period
-    ``frame_skip * timestep`` equals ``time_step`` (s), the timestep read from the model.
-
-    Returns ``{"timestep", "default_frame_skip", "default_period", "frame_skip",
-    "integrator"}``; ``ValueError`` when ``time_step`` is not a whole multiple of the timestep.
-    """
-    import gymnasium
-    import mujoco
-
-    env = gymnasium.make(env_id)
-    try:
-        model = env.unwrapped.model
-        timestep = float(model.opt.timestep)
-        default = int(env.unwrapped.frame_skip)
-        integrator = mujoco.mjtIntegrator(model.opt.integrator).name.removeprefix("mjINT_")
-        integrator = {"EULER": "Euler"}.get(integrator, integrator)
-    finally:
-        env.close()
-    ratio = time_step / timestep
-    skip = int(round(ratio))
-    if skip < 1 or abs(ratio - skip) > 1e-9 * ratio:
-        raise ValueError(
-            f"time_step {time_step} s is not a whole multiple of {env_id}'s timestep {timestep} s"
-        )
-    return {"timestep": timestep, "default_frame_skip": default,
-            "default_period": default * timestep, "frame_skip": skip,
-            "integrator": integrator}  # fmt: skip
-
-
-def statistics(episodes: list[dict]) -> dict:
-    """Mean and std (over the episodes) of the return, length (steps and s), forward velocity
-    (m/s) and the reward's terms; the per-episode returns and lengths; the fraction terminated;
-    the steps whose contact solve did not converge (on our plant; 0 in MuJoCo)."""
-    out = {"episodes": len(episodes)}
-    for key in ("return", "length", "seconds", "forward_distance", "forward_velocity",
-                "reward_forward", "reward_ctrl", "reward_survive", "action_rms",
-                "saturated_fraction"):  # fmt: skip
-        values = np.array([e[key] for e in episodes], dtype=float)
-        out[f"{key}_mean"] = float(values.mean())
-        out[f"{key}_std"] = float(values.std())
-    out["returns"] = [float(e["return"]) for e in episodes]
-    out["lengths"] = [int(e["length"]) for e in episodes]
-    out["terminated_fraction"] = float(np.mean([e["terminated"] for e in episodes]))
-    out["unconverged_steps"] = int(sum(e["unconverged_steps"] for e in episodes))
-    return out
-
-
 # ----------------------------------------------------------------------------------- training
 
 
@@ -275,52 +141,48 @@ def train_policy(name: str, config: Config, eval_task, folder: Path) -> Path:
     contact as ``config.smoothing``), keep the best iterate by the deterministic return on
     ``eval_task`` (our exact plant) from ``select_episodes`` reset states, and save it to
     ``folder/policies/<name>_fopg_<smoothing>``. Returns the saved JSON's path."""
-    from drake_abs.contact.smoothing import ContactAware
     from drake_abs.contact.unconverged import UnconvergedStepWarning
-    from drake_abs.engine import rollout
     from drake_abs.lcp.ipm import LCPConvergenceWarning
-    from drake_abs.policy.estimators import first_order
+    from drake_abs.policy.methods import method
     from drake_abs.policy.policies import LinearPolicy
     from drake_abs.policy.saving import save_policy
     from drake_abs.policy.training import Adam, train
     from drake_abs.tasks.locomotion import locomotion_task
+    from drake_abs.tasks.locomotion_training import evaluate
 
-    smoothing = ContactAware(*config.contact_aware) if config.smoothing == "abs" else None
+    fopg = method("fopg_abs" if config.smoothing == "abs" else "fopg_exact")
+    smoothing = (fopg.smoothing_policy(contact_aware=config.contact_aware)
+                 if config.smoothing == "abs" else None)  # fmt: skip
     task = locomotion_task(name, smoothing=smoothing)
     inner = LinearPolicy(task.n_obs, task.nu)
     objective = task.objective(inner, config.horizon, config.sigma)
-    x_select = eval_task.initial_states(
-        np.random.default_rng([config.train_seed, 1]), config.select_episodes
-    )
-    policy = eval_task.policy(inner)
-    seen: list[tuple[float, np.ndarray]] = []
+    x_select = eval_task.initial_states(np.random.default_rng([config.train_seed, 1]),
+                                        config.select_episodes)  # fmt: skip
+    seen: list[tuple[float, np.ndarray]] = []  # (deterministic return, theta) of every iterate
 
-    def evaluate(theta: np.ndarray) -> float:
-        noise = np.zeros((len(x_select), config.horizon, task.nu))
-        r = rollout(eval_task.stepper, policy, theta, x_select, noise, eval_task.reward,
-                    sigma=0.0, gradient=False, on_unconverged="flag")  # fmt: skip
-        seen.append((float(np.mean(r.returns)), np.array(theta)))
+    def score(theta: np.ndarray) -> float:
+        seen.append((evaluate(eval_task, theta, x_select, config.horizon), np.array(theta)))
         return seen[-1][0]
 
-    method = f"fopg_{config.smoothing}"
+    label = f"fopg_{config.smoothing}"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted in the log's rows
         warnings.simplefilter("ignore", UnconvergedStepWarning)
         run_ = train(
-            lambda theta, rng: first_order(objective, theta, rng, config.rollouts),
+            lambda theta, rng: fopg.estimate(objective, theta, rng, config.rollouts),
             np.zeros(inner.n_params), Adam(lr=config.learning_rate), config.iterations,
-            seed=config.train_seed, evaluate=evaluate if config.select_episodes else None,
-            log_dir=folder / "training", name=f"{name}_{method}",
+            seed=config.train_seed, evaluate=score if config.select_episodes else None,
+            log_dir=folder / "training", name=f"{name}_{label}",
             config={"task": name, **asdict(config)}, progress=False,
         )  # fmt: skip
     theta, chosen = run_.theta, len(run_.rows) - 1
     if seen:
         chosen = int(np.argmax([value for value, _ in seen]))
         theta = seen[chosen][1]
-    info = {"task": name, "method": method, "iteration": chosen,
+    info = {"task": name, "method": label, "iteration": chosen,
             "smoothing": repr(smoothing) if smoothing else "scene (exact)",
             "experiment": NAME, **asdict(config)}  # fmt: skip
-    paths = save_policy(folder / "policies" / f"{name}_{method}", task.policy(inner), theta,
+    paths = save_policy(folder / "policies" / f"{name}_{label}", task.policy(inner), theta,
                         task=name, config=info)  # fmt: skip
     return paths["json"]
 
@@ -348,8 +210,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     from pydrake.geometry import Meshcat, MeshcatParams
 
     from drake_abs.diagrams.policy_replay import replay_policy_html
+    from drake_abs.policy.policies import LinearPolicy
+    from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
+    from drake_abs.reference.mujoco_plant import MujocoStepper
+    from drake_abs.tasks.episodes import episode_statistics, score_episodes
     from drake_abs.tasks.locomotion import TASKS, locomotion_task
-    from drake_abs.tasks.saved_policies import load_policy
+    from drake_abs.tasks.saved_policies import load_policy, reset_state
 
     config = config or Config()
     config.check()
@@ -375,43 +241,40 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                                "frame_skip": mujoco["frame_skip"],
                                "timestep": mujoco["timestep"], "integrator": mujoco["integrator"]},
         }  # fmt: skip
+        x_mujoco = reset_states(env_id, config.seeds)
+        # setting -> (stepper, its initial states); None: the task's own stepper
+        steppers = {
+            "ours": (None, np.array([reset_state(task, s) for s in config.seeds])),
+            "mujoco_default": (MujocoStepper.from_gymnasium(env_id), x_mujoco),
+            "mujoco_same_dt": (MujocoStepper.from_gymnasium(
+                env_id, frame_skip=mujoco["frame_skip"]), x_mujoco),
+        }  # fmt: skip
         paths = saved_paths[name]
         sources = {p: "saved" for p in paths}
         if not paths:
             trained = train_policy(name, config, task, out)
             paths, sources = [trained], {trained: "trained here"}
-        actors: dict[str, tuple[Actor, dict]] = {}
+        candidates: dict[str, dict] = {}  # label -> policy, theta, source, file, saved
         for path in paths:
             saved = load_policy(path, task=task)
-            label = Path(path).name.removesuffix(".json")
-            actors[label] = (actor_of(saved), {"source": sources[path], "file": str(path),
-                                               "saved": saved})  # fmt: skip
+            candidates[Path(path).name.removesuffix(".json")] = {
+                "policy": saved.policy, "theta": saved.theta, "source": sources[path],
+                "file": str(path), "saved": saved,
+            }  # fmt: skip
         if config.reference:
-            actors[REFERENCE] = (zero_actor(task.nu), {"source": "reference", "file": None})
-        envs = {
-            "mujoco_default": make_gymnasium(env_id, config.steps),
-            "mujoco_same_dt": make_gymnasium(env_id, config.steps, mujoco["frame_skip"]),
-        }
+            zero = LinearPolicy(task.nx, task.nu)  # zero parameters: the zero action
+            candidates[REFERENCE] = {"policy": zero, "theta": np.zeros(zero.n_params),
+                                     "source": "reference", "file": None}  # fmt: skip
         policies = {}
-        try:
-            for label, (actor, meta) in actors.items():
-                episodes = {
-                    "ours": evaluate_ours(task, actor, config.seeds, config.steps),
-                    **{key: evaluate_gymnasium(env, actor, config.seeds, config.steps)
-                       for key, env in envs.items()},
-                }  # fmt: skip
-                policies[label] = {
-                    "source": meta["source"], "file": meta["file"],
-                    "results": {key: statistics(eps) for key, eps in episodes.items()},
-                }  # fmt: skip
-        finally:
-            for env in envs.values():
-                env.close()
-        for entry in policies.values():
-            entry["differences"] = differences(entry["results"])
+        for label, c in candidates.items():
+            policies[label] = {"source": c["source"], "file": c["file"], "results": {
+                key: episode_statistics(score_episodes(task, c["policy"], c["theta"], x0s,
+                                                       config.steps, stepper=stepper))
+                for key, (stepper, x0s) in steppers.items()}}  # fmt: skip
+            policies[label]["differences"] = differences(policies[label]["results"])
         learned = [label for label in policies if label != REFERENCE]
         best = max(learned, key=lambda lb: policies[lb]["results"]["ours"]["return_mean"])
-        replay = replay_policy_html(actors[best][1]["saved"], out / f"{name}_replay.html",
+        replay = replay_policy_html(candidates[best]["saved"], out / f"{name}_replay.html",
                                     steps=config.replay_steps, seed=config.seeds[0],
                                     meshcat=meshcat)  # fmt: skip
         files[f"{name}_replay"] = replay.path

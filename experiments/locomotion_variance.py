@@ -9,13 +9,13 @@ linear policy keeps the measurement about the dynamics), at fixed parameters dra
 N(0, ``theta_scale``^2) with ``seed``; the exploration noise is ``sigma`` in action units
 (actions live in [-1, 1]). Nothing is trained here.
 
-For each task, unroll length H and smoothing policy (exact contact, barrier smoothing with fixed
-mu over several decades, contact-aware ABS in both gradient modes) the FOPG variance
+For each task, unroll length H and smoothing (exact contact, barrier smoothing with fixed mu over
+several decades, contact-aware ABS in both gradient modes) the FOPG variance
 ``v = E||g - E g||^2`` is measured from ``batches`` independent estimates of ``samples``
-rollouts each (:func:`drake_abs.policy.gradient_stats.variance_bias_sweep`; every policy at one
-H sees the same noise). Per curve, exponential and power-law fits of v over H (as in the
-hopping-ball experiment), and per horizon whether v decreases as mu increases (the paper's
-second claim).
+rollouts each (:func:`drake_abs.policy.gradient_stats.variance_bias_sweep`; every smoothing at
+one H sees the same noise). Per curve, exponential and power-law fits of v over H and per
+horizon whether v decreases as mu increases (the paper's second claim),
+:mod:`drake_abs.policy.variance_growth`.
 
 Outputs in ``out``: ``figure3_locomotion.png`` (one panel per task, variance against H, log
 scale), ``summary.json``.
@@ -32,14 +32,9 @@ import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
 from drake_abs.experiments._common import file_list, progress, readable, results_dir
-from drake_abs.experiments.gradient_variance import (
-    curve_label,
-    fit_growth,
-    line_style,
-    mu_ordering,
-)
 from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
 from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.variance_growth import curve_style, mu_ordering, variance_curves
 
 NAME = "locomotion-variance"
 MODES = ("frozen", "total")
@@ -69,7 +64,7 @@ class Config:
         return cls(horizons=(5, 10, 20), fixed_mus=(1e-10, 1e-2), samples=8, batches=4)
 
 
-def policies(config: Config) -> dict[str, SmoothingPolicy]:
+def smoothings(config: Config) -> dict[str, SmoothingPolicy]:
     out: dict[str, SmoothingPolicy] = {"exact": Exact()}
     out.update({f"BS mu={mu:g}": Fixed(mu) for mu in config.fixed_mus})
     out["ABS contact-aware"] = ContactAware(*config.contact_aware)
@@ -82,58 +77,48 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     from drake_abs.tasks.locomotion import locomotion_task
 
     config = config or Config()
-    for name in config.tasks:
-        if name not in TASKS:
-            raise ValueError(f"tasks must be among {TASKS}; got {name!r}")
+    if any(name not in TASKS for name in config.tasks):
+        raise ValueError(f"tasks must be among {TASKS}; got {config.tasks!r}")
     out = results_dir(NAME, out)
     start = time.perf_counter()
-    pols = policies(config)
+    designs = smoothings(config)
     per_task = len(config.horizons) * sum(1 if p.is_constant else len(MODES)
-                                          for p in pols.values())  # fmt: skip
+                                          for p in designs.values())  # fmt: skip
     bar = progress(total=per_task * len(config.tasks), desc=f"{NAME}: points")
+
+    def tick(line: str) -> None:
+        bar.set_postfix_str(line)
+        bar.update()
+
     results = {}
     for name in config.tasks:
-        tasks: dict = {}  # (smoothing name, mode) -> task: each scene built once per design
+        tasks: dict = {}  # (smoothing, mode) -> task: each scene built once per design
 
-        def make_objective(smoothing, mode, H, name=name, tasks=tasks):
+        def objective(smoothing, mode, H, name=name, tasks=tasks):
             key = (repr(smoothing), mode)
             if key not in tasks:
                 tasks[key] = locomotion_task(name, smoothing=smoothing, gradient=mode)
             task = tasks[key]
             return task.objective(LinearPolicy(task.n_obs, task.nu), H, config.sigma)
 
-        probe = make_objective(Exact(), "frozen", 1)
-        theta = config.theta_scale * np.random.default_rng(config.seed).standard_normal(
-            probe.policy.n_params
-        )
-
-        def tick(line: str) -> None:
-            bar.set_postfix_str(line)
-            bar.update()
-
+        n_params = objective(Exact(), "frozen", 1).policy.n_params
+        dt = next(iter(tasks.values())).dt  # s, the scene's time step
+        theta = config.theta_scale * np.random.default_rng(config.seed).standard_normal(n_params)
         rows = variance_bias_sweep(
-            make_objective, theta, pols, config.horizons, batches=config.batches,
+            objective, theta, designs, config.horizons, batches=config.batches,
             seed=config.seed, estimator=fopg(config.samples), modes=MODES, progress=tick,
         )  # fmt: skip
-        curves: dict[str, dict] = {}
-        for row in rows:
-            c = curves.setdefault(curve_label(row), {"horizon": [], "variance": [],
-                                                     "variance_se": []})  # fmt: skip
-            c["horizon"].append(row["horizon"])
-            c["variance"].append(row["trace_variance"])
-            c["variance_se"].append(row["trace_variance_se"])
-            c.setdefault("dropped", []).append(row.get("dropped_rollouts", 0))
-        for c in curves.values():
-            keep = [i for i, h in enumerate(c["horizon"]) if h >= config.fit_from]
-            c["fit"] = fit_growth([c["horizon"][i] for i in keep],
-                                  [c["variance"][i] for i in keep])  # fmt: skip
+        curves = variance_curves(
+            rows,
+            fit_from=config.fit_from,
+            time_step=dt,
+            extra=lambda r: {"dropped": r.get("dropped_rollouts", 0)},
+        )
         results[name] = {
-            "curves": curves,
-            "mu_ordering": mu_ordering(rows, config.horizons),
+            "curves": curves, "mu_ordering": mu_ordering(rows, config.horizons),
             "unconverged_steps": int(sum(r["unconverged_steps"] for r in rows)),
-            "theta": theta.tolist(),
-            "rows": rows,
-        }
+            "theta": theta.tolist(), "rows": rows,
+        }  # fmt: skip
     bar.close()
     summary = {"config": asdict(config), "tasks": results,
                "seconds": time.perf_counter() - start}  # fmt: skip
@@ -155,9 +140,9 @@ def _plot(results: dict, path: Path) -> Path:
     for ax, (name, res) in zip(axes[0], results.items(), strict=True):
         curves = res["curves"]
         for label, c in curves.items():
+            style = curve_style(label, list(curves), matplotlib.colormaps["viridis"])
             ax.errorbar(c["horizon"], c["variance"], yerr=c["variance_se"], marker="o", ms=3,
-                        capsize=2, label=readable(label),
-                        **line_style(label, list(curves)))  # fmt: skip
+                        capsize=2, label=readable(label), **style)  # fmt: skip
         ax.set(xlabel="unroll length H (steps of 0.01 s)", yscale="log",
                ylabel="FOPG gradient variance E||g - Eg||^2",
                title=f"{name.replace('_', '-')} (gymnasium v5 task on our plant)")  # fmt: skip
@@ -175,7 +160,7 @@ def report(summary: dict) -> str:
     for name, res in summary["tasks"].items():
         H = summary["config"]["horizons"][-1]
         lines.append(f"{name}: unconverged steps {res['unconverged_steps']}")
-        lines.append(f"  {'policy':32s} {'v at H=' + str(H):>12s} {'rate/step':>10s} "
+        lines.append(f"  {'smoothing':32s} {'v at H=' + str(H):>12s} {'rate/step':>10s} "
                      f"{'power':>7s}  better fit")  # fmt: skip
         for label, c in res["curves"].items():
             f = c["fit"]
@@ -186,9 +171,10 @@ def report(summary: dict) -> str:
         for h, o in res["mu_ordering"].items():
             ratio = o["ratio_smallest_to_largest_mu"]
             ratio = "n/a" if ratio is None else format(ratio, ".3g")
-            ups = f"{o['significant_increases']} of {o['pairs']}"
-            lines.append(f"  H={h}: BS variance smallest/largest mu = {ratio}; significant "
-                         f"increases with mu: {ups}")  # fmt: skip
+            lines.append(
+                f"  H={h}: BS variance smallest/largest mu = {ratio}; significant "
+                f"increases with mu: {o['significant_increases']} of {o['pairs']}"
+            )
     return "\n".join(lines)
 
 

@@ -22,10 +22,10 @@ from drake_abs.experiments.locomotion_transfer import (  # noqa: E402
     Config,
     report,
     run,
-    same_period_frame_skip,
 )
 from drake_abs.policy.policies import LinearPolicy  # noqa: E402
 from drake_abs.policy.saving import save_policy  # noqa: E402
+from drake_abs.reference.gymnasium_mujoco import same_period_frame_skip  # noqa: E402
 from drake_abs.tasks.locomotion import locomotion_task  # noqa: E402
 from drake_abs.tasks.saved_policies import load_policy  # noqa: E402
 
