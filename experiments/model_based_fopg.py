@@ -91,25 +91,45 @@ class Config:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)!r}")
 
 
-class NoisyPolicy:
+def noisy_feedback(task, inner, theta, sigma: float, effort: np.ndarray, seeds, steps: int):
     """The task's policy of the observation with Gaussian exploration noise ``sigma`` (action
-    units), as torques: ``u = clip(gears (inner(obs(x)) + sigma xi), -effort, effort)``. Its
-    noise is reseeded at every episode (``reset(seed)``) by the data source."""
+    units), as torques: ``u_t = clip(gears (inner(obs(x_t)) + sigma xi_t), -effort, effort)``,
+    one row per episode, its noise xi (steps, nu) drawn by ``default_rng(seed)`` of the
+    episode's seed: a :class:`~drake_abs.policy.controls.TimeVaryingController`. Each row is
+    evaluated by itself (a batched matrix product rounds otherwise than one row's)."""
+    from drake_abs.policy.controls import TimeVaryingController
 
-    def __init__(self, task, inner, theta, sigma: float, effort: np.ndarray):
-        self.task, self.inner, self.theta = task, inner, np.asarray(theta, float)
-        self.sigma, self.effort = float(sigma), np.asarray(effort, float)
-        self.gears = np.asarray(task.stepper.scale, float)
-        self.rng = np.random.default_rng(0)
+    policy, gears = task.policy(inner), np.asarray(task.stepper.scale, float)
+    noise = np.stack([np.random.default_rng(s).standard_normal((steps, task.nu)) for s in seeds])
 
-    def reset(self, seed: int | None) -> None:
-        self.rng = np.random.default_rng(seed)
+    def control(t: int, x: np.ndarray) -> np.ndarray:
+        a = np.concatenate([policy.act(theta, x[m : m + 1]) for m in range(x.shape[0])])
+        return np.clip(gears * (a + sigma * noise[:, t]), -effort, effort)
 
-    def __call__(self, x, t: int) -> np.ndarray:
-        obs = self.task.observation(np.asarray(x, float)[None])
-        a = self.inner.act(self.theta, obs)[0] + self.sigma * self.rng.standard_normal(
-            self.gears.size)  # fmt: skip
-        return np.clip(self.gears * a, -self.effort, self.effort)
+    return TimeVaryingController(control, task.nx, task.nu)
+
+
+def mujoco_episodes(source, task, episodes: int, steps: int, seed: int, controls):
+    """``episodes`` MuJoCo episodes (``source``) of at most ``steps`` steps as transitions:
+    episode e from gymnasium's reset of the seed ``episode_seed(seed, e)`` (the task's reset
+    noise), under ``controls(seeds)``: inputs (episodes, steps, nu) or a time-varying policy,
+    ending where the task terminates (the Hopper falls)."""
+    from drake_abs.engine import open_loop, rollout
+    from drake_abs.learning.transitions import Transitions
+    from drake_abs.policy.controls import episode_seed
+
+    seeds = [episode_seed(seed, e) for e in range(episodes)]
+    x0 = np.array([task.reset_noise.sample(np.random.default_rng(s), task.x0, task.nq, 1)[0]
+                   for s in seeds])  # fmt: skip
+    made = controls(seeds)
+    if isinstance(made, np.ndarray):
+        run = open_loop(source.stepper, x0, made, jacobians=False)
+    else:
+        zeros = np.zeros((episodes, steps, task.nu))
+        run = rollout(source.stepper, made, np.zeros(0), x0, zeros, sigma=0.0, gradient=False,
+                      on_unconverged="flag")  # fmt: skip
+    return Transitions.from_trajectory(run, source=source.name, time_step=source.time_step,
+                                       terminated=task.reward.terminated)  # fmt: skip
 
 
 def with_model(task, names, theta):
@@ -132,8 +152,6 @@ def _locomotion_config(config: Config):
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    from drake_abs.experiments import model_learning as ml
-    from drake_abs.experiments import transition_sources as ts
     from drake_abs.experiments.locomotion import train_method
     from drake_abs.experiments.locomotion_transfer import (
         evaluate_gymnasium,
@@ -141,8 +159,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         same_period_frame_skip,
         statistics,
     )
+    from drake_abs.learning.scene_fits import fit_parameters, learned_names, perturbed_start
+    from drake_abs.multibody import build_scene_model
+    from drake_abs.policy.controls import uniform_inputs
     from drake_abs.policy.policies import LinearPolicy
     from drake_abs.policy.saving import save_policy
+    from drake_abs.reference.scene_sources import mujoco_source
     from drake_abs.tasks.locomotion import TASKS, locomotion_task
 
     config = Config() if config is None else config
@@ -155,15 +177,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     base = locomotion_task(config.task, smoothing=smoothing)
     true_task = locomotion_task(config.task)  # exact contact, the file's parameters
     model = base.stepper.stepper
-    names = ml.learned_names(model)
+    names = learned_names(model)
     truth = learned_values(model, names)
-    rng = np.random.default_rng(config.seed)
-    learning = ml.Config(ground_offset=config.ground_offset, perturbation=config.perturbation,
-                         eps=config.eps, gradient_iterations=config.fit_iterations,
-                         search_iterations=config.fit_iterations,
-                         search_directions=config.search_directions,
-                         max_transitions=config.max_transitions, seed=config.seed)  # fmt: skip
-    theta_start, scale, lo, hi = ml.start_and_scale(names, truth, learning, rng)
+    theta_start, scale, lo, hi = perturbed_start(
+        names, truth, ground_offset=config.ground_offset, perturbation=config.perturbation,
+        rng=np.random.default_rng(config.seed),
+    )  # fmt: skip
 
     frame = same_period_frame_skip(env_id, base.dt)
     env = make_gymnasium(env_id, config.eval_steps, frame["frame_skip"])
@@ -181,9 +200,14 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                 "mujoco_length": mujoco_stats["length_mean"], "our_return": ours}  # fmt: skip
 
     # round 0: random inputs in MuJoCo
-    low, high = ts.control_range(scene)
-    data = ts.mujoco_transitions(scene, ts.random_policy(low.size, low, high, config.seed),
-                                 config.initial_episodes, config.steps, config.seed)  # fmt: skip
+    source, effort = mujoco_source(build_scene_model(scene)), model.effort
+
+    def random_inputs(seeds):
+        return np.stack([uniform_inputs(config.steps, -effort, effort, seed=[config.seed, s])
+                         for s in seeds])  # fmt: skip
+
+    data = mujoco_episodes(source, base, config.initial_episodes, config.steps, config.seed,
+                           random_inputs)  # fmt: skip
     loc = _locomotion_config(config)
     x_eval = base.initial_states(np.random.default_rng([config.seed, 2]), 1)
     tasks = {"file": base, "start": with_model(base, names, theta_start)}
@@ -196,8 +220,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     for k in progress(range(1, config.rounds + 1), desc=NAME):
         # (1) the model update on all data so far, from the last round's theta
         t0 = time.perf_counter()
-        result = ml.fit(model, (data.x, data.u, data.x_next), config.fit, names, theta_model,
-                        scale, lo, hi, learning, config.seed + k)  # fmt: skip
+        result = fit_parameters(
+            model, data.x, data.u, data.x_next, config.fit, names, theta_model, scale, lo, hi,
+            eps=config.eps, search_iterations=config.fit_iterations,
+            search_directions=config.search_directions, gradient_iterations=config.fit_iterations,
+            max_transitions=config.max_transitions, seed=config.seed + k,
+        )  # fmt: skip
         theta_model = result.theta
         fits.append({"round": k, "theta": theta_model.tolist(), "loss": result.loss,
                      "seconds": time.perf_counter() - t0,
@@ -212,9 +240,13 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             theta_pi[arm] = run_k["theta"]
             seconds[arm] = time.perf_counter() - t0
         # (3) the learned arm's policy, with exploration noise, in MuJoCo: new data
-        policy = NoisyPolicy(base, inner, theta_pi["learned"], config.sigma, high)
-        new = ts.mujoco_transitions(scene, policy, config.episodes_per_round, config.steps,
-                                    config.seed * 100 + k)  # fmt: skip
+        theta = theta_pi["learned"]
+
+        def explore(seeds, theta=theta):
+            return noisy_feedback(base, inner, theta, config.sigma, effort, seeds, config.steps)
+
+        new = mujoco_episodes(source, base, config.episodes_per_round, config.steps,
+                              config.seed * 100 + k, explore)  # fmt: skip
         data = data.concatenate(new)
         for arm in ARMS:
             rows.append({"round": k, "arm": arm, "transitions": int(data.x.shape[0]),

@@ -3,14 +3,14 @@ al. 2023, section 6 and its model-learning figure; Bianchini et al. 2022's losse
 neural-network dynamics model trained on the same data.
 
 For each scene (the pushed box, gymnasium's hopper and half-cheetah) and each data source
-(Drake's MultibodyPlant with the SAP solver, MuJoCo), trajectories under random and scripted
-policies are collected (:mod:`drake_abs.experiments.transition_sources`) and split by episode
-into training and test sets. Then, for each training-set size:
+(Drake's MultibodyPlant with the SAP solver, MuJoCo; :mod:`drake_abs.reference.scene_sources`),
+episodes under random and scripted inputs are recorded by the engine (:func:`collect`) and split
+by episode into training and test sets. Then, for each training-set size:
 
 1. our model's parameters theta (the ground height, one friction coefficient for every contact,
    each body's mass, the damping of each joint the model file damps) start from values off the
    model file's (seeded: the ground ``ground_offset`` m higher, the others scaled by factors
-   within ``1 +- perturbation``), and are fitted
+   within ``1 +- perturbation``), and are fitted (:mod:`drake_abs.learning.scene_fits`)
 
    - by random search on eq. 6.1 (the explicit loss through the exact model): the paper's way,
    - by L-BFGS-B on the explicit loss through the model with adaptive barrier smoothing,
@@ -20,12 +20,12 @@ into training and test sets. Then, for each training-set size:
 2. an ensemble of neural networks (:class:`drake_abs.policy.mbpo.MlpEnsemble`: least squares
    plus a tanh MLP residual, as our MBPO baseline) is fitted to the same transitions;
 
-3. each model predicts the test trajectories open loop from their recorded start state and
-   inputs, and the state prediction error is reported against the horizon: the root mean square
-   over the state's coordinates of the error divided by that coordinate's standard deviation in
-   the data (1 = as far off as the data's own spread), averaged over test windows. The models
-   with the model file's parameters ("file") and with the starting parameters ("start") are
-   reported beside them.
+3. each model predicts the test trajectories open loop (the engine's) from their recorded start
+   state and inputs, and the state prediction error is reported against the horizon: the root
+   mean square over the state's coordinates of the error divided by that coordinate's standard
+   deviation in the data (1 = as far off as the data's own spread), averaged over test windows.
+   The models with the model file's parameters ("file") and with the starting parameters
+   ("start") are reported beside them.
 
 The recovered parameters are reported beside the model file's: with SAP data the file's values
 are the data's own masses and damping (the SAP twin is built from the same file), with MuJoCo
@@ -48,15 +48,25 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.smoothing import ContactAware, Exact
+from drake_abs.contact.step import Step
+from drake_abs.engine import open_loop
 from drake_abs.experiments._common import file_list, progress, results_dir
-from drake_abs.learning.fitting import fit_gradient, fit_random_search
-from drake_abs.learning.scene_losses import ModelLoss, learned_values, stepper_at
+from drake_abs.learning.scene_fits import FITS, fit_parameters, learned_names, perturbed_start
+from drake_abs.learning.scene_losses import learned_values, stepper_at
+from drake_abs.learning.transitions import Transitions
+from drake_abs.policy.controls import episode_seed, push_inputs, sinusoid_inputs, uniform_inputs
 
 NAME = "model-learning"
 SCENES = ("box_push", "gym_hopper", "gym_half_cheetah")
 SOURCES = ("sap", "mujoco")
-FITS = ("random_search", "explicit", "naive_implicit", "violation_implicit")
+#: The scripted inputs: the box's pushes (up to 12 N: it slides beyond mu m g = 4.9 N and sticks
+#: below it), the locomotion scenes' gaits (a share of each motor's effort limit, Hz).
+PUSH = 12.0
+GAITS = {"gym_hopper": (0.3, 2.0), "gym_half_cheetah": (0.5, 2.5)}
+#: The box's initial-state noise, as half-widths of the position offset (m), the tilt (rad),
+#: the lift (m) and the velocity (m/s, m/s, rad/s); its half length and half height (m).
+BOX_NOISE = {"x": 0.1, "pitch": 0.1, "lift": 0.02, "v": (0.5, 0.2, 1.0)}
+BOX_HALF = (0.2, 0.1)
 
 
 @dataclass(frozen=True)
@@ -94,142 +104,128 @@ class Config:
                    max_transitions=24)  # fmt: skip
 
 
-def collect(scene: str, source: str, config: Config) -> tuple:
-    """The scene's transitions from ``source``: ``(random, scripted)``, each of
-    ``max(train_episodes) + test_episodes`` episodes (seeded), the first under uniformly random
-    inputs within the effort limits, the second under the scene's scripted policy (a gait, a
-    push profile). gymnasium's Hopper runs without its termination, so that every episode has
-    its ``steps`` steps."""
-    from drake_abs.experiments import transition_sources as ts
+def initial_states(model, seeds) -> np.ndarray:
+    """(E, nx) initial states, one per episode seed: the scene's x0 plus noise drawn from
+    ``default_rng(seed)``: for the locomotion scenes gymnasium's reset noise (as
+    ``env.reset(seed=seed)`` draws it, so Drake and MuJoCo episodes of one seed start alike);
+    for the box a random position offset, tilt (lifted so that no corner starts below the
+    ground) and velocity."""
+    from drake_abs.tasks.locomotion import TASKS
 
+    scene, nq = model.scene.name, model.contact_model.nq
+    out = []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        x = np.array(model.x0, dtype=float)
+        if scene != "box_push":
+            spec = next(t for t in TASKS.values() if t.scene == scene)
+            out.append(spec.reset_noise.sample(rng, x, nq, 1)[0])
+            continue
+        pitch = x[2] + rng.uniform(-BOX_NOISE["pitch"], BOX_NOISE["pitch"])
+        # lift so that the lowest corner is where it was before the tilt, then a random gap
+        lift = (BOX_HALF[0] * abs(np.sin(pitch)) + BOX_HALF[1] * np.cos(pitch)) - BOX_HALF[1]
+        x[0] += rng.uniform(-BOX_NOISE["x"], BOX_NOISE["x"])
+        x[1] += lift + rng.uniform(0.0, BOX_NOISE["lift"])
+        x[2] = pitch
+        x[nq:] += rng.uniform(-1.0, 1.0, 3) * np.asarray(BOX_NOISE["v"])
+        out.append(x)
+    return np.array(out)
+
+
+def scripted_inputs(model, steps: int, effort: np.ndarray, seed) -> np.ndarray:
+    """(steps, nu) the scene's scripted inputs: the box's pushes (:data:`PUSH`), the locomotion
+    scenes' gaits (:data:`GAITS`) with seeded phases."""
+    if model.scene.name == "box_push":
+        return push_inputs(steps, PUSH, seed=seed)
+    share, frequency = GAITS[model.scene.name]
+    return sinusoid_inputs(steps, share * effort, frequency, model.scene.time_step, seed=seed)
+
+
+def collect(model, effort: np.ndarray, source: str, config: Config) -> tuple:
+    """The scene's transitions from ``source`` (Drake's SAP twin or MuJoCo,
+    :mod:`drake_abs.reference.scene_sources`): ``(random, scripted)``, each of
+    ``max(train_episodes) + test_episodes`` seeded episodes of ``steps`` steps, the first under
+    inputs uniform within the effort limits ``effort`` (nu,), the second under the scene's
+    scripted inputs. gymnasium's Hopper runs without its termination, so that every episode has
+    its ``steps`` steps."""
+    from drake_abs.reference.scene_sources import drake_source, mujoco_source
+
+    source_of = drake_source(model) if source == "sap" else mujoco_source(model)
     episodes = max(config.train_episodes) + config.test_episodes
-    make = ts.sap_transitions if source == "sap" else ts.mujoco_transitions
-    options = {}
-    if source == "mujoco" and scene == "gym_hopper":
-        options["env_options"] = {"terminate_when_unhealthy": False}
-    seed = config.seed * 1000 + SCENES.index(scene) * 10 + SOURCES.index(source)
-    low, high = ts.control_range(scene)
-    random_data = make(scene, ts.random_policy(low.size, low, high, seed), episodes,
-                       config.steps, seed, **options)  # fmt: skip
-    scripted = make(scene, ts.scripted_policy(scene, seed + 1), episodes, config.steps, seed + 1,
-                    **options)  # fmt: skip
+    seed = config.seed * 1000 + SCENES.index(model.scene.name) * 10 + SOURCES.index(source)
+
+    def record(inputs, run_seed: int) -> Transitions:
+        seeds = [episode_seed(run_seed, e) for e in range(episodes)]
+        u = np.stack([inputs([run_seed, s]) for s in seeds])
+        x0, u = initial_states(model, seeds), np.clip(u, -effort, effort)
+        run = open_loop(source_of.stepper, x0, u, jacobians=False, on_unconverged="flag")
+        return Transitions.from_trajectory(run, source=source_of.name,
+                                           time_step=source_of.time_step)  # fmt: skip
+
+    random_data = record(lambda key: uniform_inputs(config.steps, -effort, effort, seed=key), seed)
+    scripted = record(lambda key: scripted_inputs(model, config.steps, effort, key), seed + 1)
     return random_data, scripted
 
 
-def learned_names(stepper) -> list[str]:
-    """The parameters fitted: the ground height, one friction coefficient for every contact
-    (tied), each body's mass, the damping of each joint the model file damps."""
-    names = stepper.parameter_names
-    out = ["ground_height"]
-    if any(n.startswith("friction[") for n in names):
-        out.append("friction[*]")
-    out += [n for n in names if n.startswith("mass[")]
-    values = stepper.parameter_values()
-    out += [n for n, v in zip(names, values, strict=True) if n.startswith("damping[") and v > 0]
-    return out
+class Predictor:
+    """A model's one-step prediction ``predict(x, u) -> (x_next, converged)`` as a stepper, for
+    the engine's open loop: a row that is not finite is not stepped and stays NaN, and so does a
+    row whose step did not converge (a lost prediction is not passed off as one)."""
+
+    parameter_names = ()
+
+    def __init__(self, predict):
+        self.predict = predict
+
+    def step(self, x, u, *, jacobians: bool = False, parameters: bool = False) -> Step:
+        out = np.full_like(x, np.nan)
+        ok = np.isfinite(x).all(axis=1)
+        if ok.any():
+            x_next, converged = self.predict(x[ok], u[ok])
+            x_next = np.array(x_next, dtype=float)
+            x_next[~np.asarray(converged, bool)] = np.nan
+            out[ok] = x_next
+        B = x.shape[0]
+        return Step(x_next=out, converged=np.isfinite(out).all(axis=1),
+                    iterations=np.zeros(B, int), impulse=np.zeros((B, 0)),
+                    mu=np.zeros((B, 0)))  # fmt: skip
+
+    @classmethod
+    def of_stepper(cls, stepper) -> Predictor:
+        def predict(x, u):
+            step = stepper.step(x, u, jacobians=False)
+            return step.x_next, step.converged
+
+        return cls(predict)
+
+    @classmethod
+    def of_ensemble(cls, ensemble) -> Predictor:
+        def predict(x, u):  # the ensemble's mean prediction
+            B = x.shape[0]
+            preds = [ensemble.predict(x, u, np.full(B, e)) for e in range(ensemble.size)]
+            return np.mean(preds, axis=0), np.ones(B, bool)
+
+        return cls(predict)
 
 
-def start_and_scale(names, truth: np.ndarray, config: Config, rng: np.random.Generator):
-    """The fits' starting parameters (seeded, off the file's), their scales and bounds."""
-    start, scale, lo, hi = [], [], [], []
-    for name, value in zip(names, truth, strict=True):
-        factor = 1.0 + config.perturbation * rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 1.0)
-        if name == "ground_height":
-            start.append(value + config.ground_offset)
-            scale.append(0.01)
-            lo.append(value - 0.2)
-            hi.append(value + 0.2)
-        elif name.startswith("damping"):
-            start.append(value * factor if value > 0 else 0.5)
-            scale.append(0.1 * max(value, 1.0))
-            lo.append(0.0)
-            hi.append(10.0 * max(value, 1.0))
-        else:  # friction, mass
-            start.append(value * factor)
-            scale.append(0.1 * value)
-            lo.append(0.02 * value)
-            hi.append(5.0 * value)
-    return (np.array(a, dtype=float) for a in (start, scale, lo, hi))
-
-
-def _subsample(x, u, x_next, n: int, rng: np.random.Generator):
-    if x.shape[0] <= n:
-        return x, u, x_next
-    keep = np.sort(rng.choice(x.shape[0], n, replace=False))
-    return x[keep], u[keep], x_next[keep]
-
-
-def fit(stepper, data, fit_name: str, names, start, scale, lo, hi, config: Config, seed: int):
-    """One fit of the parameters ``names`` to the transitions ``data`` (x, u, x_next)."""
-    rng = np.random.default_rng(seed)
-    x, u, x_next = _subsample(*data, config.max_transitions, rng)
-    if fit_name == "random_search":
-        loss = ModelLoss(stepper.with_smoothing(Exact()), x, u, x_next, names, "explicit",
-                         gradient=False)  # fmt: skip
-        return fit_random_search(loss, start, scale, iterations=config.search_iterations,
-                                 directions=config.search_directions, lower=lo, upper=hi,
-                                 seed=seed)  # fmt: skip
-    if fit_name == "explicit":
-        smoothed = stepper.with_smoothing(ContactAware(*config.contact_aware))
-        loss = ModelLoss(smoothed, x, u, x_next, names, "explicit")
-    elif fit_name == "naive_implicit":
-        loss = ModelLoss(stepper, x, u, x_next, names, "naive_implicit")
-    elif fit_name == "violation_implicit":
-        loss = ModelLoss(stepper, x, u, x_next, names, "violation_implicit", eps=config.eps)
-    else:
-        raise ValueError(f"unknown fit {fit_name!r}; known: {FITS}")
-    return fit_gradient(loss, start, scale, iterations=config.gradient_iterations, lower=lo,
-                        upper=hi)  # fmt: skip
-
-
-def open_loop(step_fn, data, horizon: int, spread: np.ndarray) -> tuple:
+def prediction_error(predictor: Predictor, data: Transitions, horizon: int, spread) -> tuple:
     """Prediction error (horizon,), and the fraction of windows lost (horizon,), of
-    ``step_fn(x (B, nx), u (B, nu)) -> x_next`` rolled open loop from each window's recorded
-    start (the test ``data``' windows of ``horizon`` steps within one episode), under its
-    recorded inputs: per step k, the mean over windows of the
-    RMS over coordinates of ``(x_hat - x) / spread``. A window whose prediction is not finite (a
-    step that did not converge, a diverging network) is lost from then on: counted, not
-    averaged."""
+    ``predictor`` rolled open loop (the engine's) from each window's recorded start (the test
+    ``data``' windows of ``horizon`` steps within one episode), under its recorded inputs: per
+    step k, the mean over windows of the RMS over coordinates of ``(x_hat - x) / spread``. A
+    window whose prediction is not finite (a step that did not converge, a diverging network)
+    is lost from then on: counted, not averaged."""
     starts = data.windows(horizon)
     if starts.size == 0:
         raise ValueError(f"no test window of {horizon} steps: the test episodes are too short")
-    xh = data.x[starts]
-    err, lost = np.empty(horizon), np.empty(horizon)
-    for k in range(horizon):
-        xh = step_fn(xh, data.u[starts + k])
-        e = (xh - data.x_next[starts + k]) / spread
-        rms = np.sqrt(np.mean(e**2, axis=1))
-        finite = np.isfinite(rms)
-        err[k] = float(np.mean(rms[finite])) if finite.any() else np.nan
-        lost[k] = 1.0 - finite.mean()
-    return err, lost
-
-
-def _model_step(stepper):
-    def step(x, u):
-        out = np.full_like(x, np.nan)
-        ok = np.isfinite(x).all(axis=1)
-        if ok.any():
-            r = stepper.step(x[ok], u[ok], jacobians=False)
-            nxt = r.x_next.copy()
-            nxt[~r.converged] = np.nan  # an unconverged prediction is not passed off as one
-            out[ok] = nxt
-        return out
-
-    return step
-
-
-def _nn_step(ensemble):
-    def step(x, u):  # the ensemble's mean prediction
-        out = np.full_like(x, np.nan)
-        ok = np.isfinite(x).all(axis=1)
-        if ok.any():
-            B = int(ok.sum())
-            preds = [ensemble.predict(x[ok], u[ok], np.full(B, e)) for e in range(ensemble.size)]
-            out[ok] = np.mean(preds, axis=0)
-        return out
-
-    return step
+    rows = starts[:, None] + np.arange(horizon)
+    run = open_loop(predictor, data.x[starts], data.u[rows], jacobians=False,
+                    on_unconverged="flag")  # fmt: skip
+    rms = np.sqrt(np.mean(((run.x[:, 1:] - data.x_next[rows]) / spread) ** 2, axis=2))
+    finite = np.isfinite(rms)
+    err = [float(np.mean(rms[finite[:, k], k])) if finite[:, k].any() else np.nan
+           for k in range(horizon)]  # fmt: skip
+    return np.array(err), 1.0 - finite.mean(axis=0)
 
 
 def _split(parts: tuple, n_train: int, n_test: int):
@@ -251,40 +247,45 @@ def _split(parts: tuple, n_train: int, n_test: int):
     return pick(True, n_train), pick(False, n_test)
 
 
-def _record(row: dict, label: str, result: tuple) -> None:
-    err, lost = result
-    row["errors"][label] = err.tolist()
-    row.setdefault("lost", {})[label] = lost.tolist()
-
-
 def run_case(scene: str, source: str, config: Config) -> dict:
     """Every fit and the NN on one scene's data from one source, for every training size."""
     from drake_abs.multibody import build_scene_model
     from drake_abs.policy.mbpo import MlpEnsemble
 
-    stepper = build_scene_model(scene).stepper()
-    parts = collect(scene, source, config)
+    model = build_scene_model(scene)
+    stepper = model.stepper()
+    parts = collect(model, stepper.effort, source, config)
     everything = parts[0].concatenate(*parts[1:])
     names = learned_names(stepper)
     truth = learned_values(stepper, names)
-    rng = np.random.default_rng(config.seed)
-    start, scale, lo, hi = start_and_scale(names, truth, config, rng)
-    start_stepper = stepper_at(stepper, names, start)
+    start, scale, lo, hi = perturbed_start(
+        names, truth, ground_offset=config.ground_offset, perturbation=config.perturbation,
+        rng=np.random.default_rng(config.seed),
+    )  # fmt: skip
     spread = np.maximum(everything.x.std(axis=0), 1e-3)
     out = {"scene": scene, "source": source, "names": names, "file": truth.tolist(),
            "start": start.tolist(), "transitions": len(everything), "sizes": []}  # fmt: skip
     for n_train in config.train_episodes:
         train, test = _split(parts, n_train, config.test_episodes)
-        tr = (train.x, train.u, train.x_next)
         row = {"train_episodes": n_train, "train_transitions": len(train), "fits": {},
-               "errors": {}}  # fmt: skip
-        for label, model in (("file", stepper), ("start", start_stepper)):
-            _record(row, label, open_loop(_model_step(model), test, config.horizon, spread))
+               "errors": {}, "lost": {}}  # fmt: skip
+
+        def record(label: str, predictor: Predictor, row=row, test=test) -> None:
+            err, lost = prediction_error(predictor, test, config.horizon, spread)
+            row["errors"][label], row["lost"][label] = err.tolist(), lost.tolist()
+
+        record("file", Predictor.of_stepper(stepper))
+        record("start", Predictor.of_stepper(stepper_at(stepper, names, start)))
         for k, fit_name in enumerate(config.fits):
             t0 = time.perf_counter()
-            result = fit(stepper, tr, fit_name, names, start, scale, lo, hi, config,
-                         config.seed + 7 * k + n_train)  # fmt: skip
-            learned = stepper_at(stepper, names, result.theta)
+            result = fit_parameters(
+                stepper, train.x, train.u, train.x_next, fit_name, names, start, scale, lo, hi,
+                eps=config.eps, contact_aware=config.contact_aware,
+                search_iterations=config.search_iterations,
+                search_directions=config.search_directions,
+                gradient_iterations=config.gradient_iterations,
+                max_transitions=config.max_transitions, seed=config.seed + 7 * k + n_train,
+            )  # fmt: skip
             row["fits"][fit_name] = {
                 "theta": result.theta.tolist(), "loss": result.loss,
                 "start_loss": result.start_loss,
@@ -292,14 +293,14 @@ def run_case(scene: str, source: str, config: Config) -> dict:
                 "unconverged_evaluations": result.unconverged_evaluations,
                 "message": result.message,
             }  # fmt: skip
-            _record(row, fit_name, open_loop(_model_step(learned), test, config.horizon, spread))
+            record(fit_name, Predictor.of_stepper(stepper_at(stepper, names, result.theta)))
         t0 = time.perf_counter()
-        nx, nu = everything.nx, everything.nu
-        ens = MlpEnsemble(nx, nu, config.nn_ensemble, config.nn_hidden, np.random.default_rng(
-            config.seed + n_train))  # fmt: skip
-        held = ens.fit(*tr, np.random.default_rng(config.seed + 1), epochs=config.nn_epochs)
+        ens = MlpEnsemble(everything.nx, everything.nu, config.nn_ensemble, config.nn_hidden,
+                          np.random.default_rng(config.seed + n_train))  # fmt: skip
+        held = ens.fit(train.x, train.u, train.x_next, np.random.default_rng(config.seed + 1),
+                       epochs=config.nn_epochs)  # fmt: skip
         row["nn"] = {"seconds": time.perf_counter() - t0, "heldout_error": held}
-        _record(row, "nn", open_loop(_nn_step(ens), test, config.horizon, spread))
+        record("nn", Predictor.of_ensemble(ens))
         out["sizes"].append(row)
     return out
 

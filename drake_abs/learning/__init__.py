@@ -10,7 +10,10 @@
   and violation-implicit losses on any multibody scene, with their gradients in the model
   parameters;
 - :mod:`~drake_abs.learning.fitting`: random search and L-BFGS-B fits of the parameters;
-- :mod:`~drake_abs.learning.transitions`: recorded transitions, split by episode.
+- :mod:`~drake_abs.learning.scene_fits`: which of a scene's parameters are learned, a fit's
+  seeded start off the model file's values, and the fits by name;
+- :mod:`~drake_abs.learning.transitions`: recorded transitions (from an engine run), split by
+  episode, and a model's one-step errors on them.
 """
 
 from drake_abs.learning.fitting import FitResult, fit_gradient, fit_random_search

@@ -1,26 +1,38 @@
 """Recorded transitions ``(x, u) -> x_next`` of a simulator, grouped in episodes, for fitting a
-model's parameters (the data sets of :mod:`drake_abs.experiments.transition_sources`: Drake's
-MultibodyPlant under SAP, MuJoCo) and for measuring its one-step and k-step prediction errors.
+model's parameters (e.g. our scenes in Drake's MultibodyPlant under SAP and in MuJoCo,
+:mod:`drake_abs.reference.scene_sources`) and for measuring its one-step and k-step prediction
+errors.
 
 A :class:`Transitions` holds N transitions in the coordinates of one of our scenes: x = (q, v)
 (nx = nq + nv), u the scene's input (nu: joint torques or forces, the stepper's units), x_next
 the state one ``time_step`` later. Rows of one episode are stored in order (``t`` = 0, 1, ...
 counts the steps within the episode), so consecutive rows of an episode chain: x_next of row i
 is x of row i + 1 (not enforced: a source records what it simulated).
+:meth:`Transitions.from_trajectory` makes them from an engine run (one rollout per episode).
 
 Everything here is numerics: no simulator, no Drake. :func:`one_step_predictions` steps any
 batched stepper (an object with ``step(x, u, jacobians=False)``, such as
-:class:`~drake_abs.multibody.stepper.ComplementarityStepper`) from the recorded states.
+:class:`~drake_abs.multibody.stepper.ComplementarityStepper`) from the recorded states;
+:func:`one_step_errors` splits a scene stepper's errors by contact and joint limits.
 """
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Transitions", "error_summary", "one_step_predictions"]
+__all__ = [
+    "CLEARANCE",
+    "NEAR_LIMIT",
+    "Transitions",
+    "error_summary",
+    "one_step_errors",
+    "one_step_predictions",
+]
 
 
 def _rng(rng) -> np.random.Generator:
@@ -134,6 +146,60 @@ class Transitions:
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_trajectory(
+        cls,
+        trajectory,
+        *,
+        source: str,
+        time_step: float,
+        in_contact: Callable[[np.ndarray], np.ndarray] | None = None,
+        terminated: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> Transitions:
+        """The transitions of an engine run (a :class:`~drake_abs.engine.Trajectory` of
+        :func:`~drake_abs.engine.open_loop` or :func:`~drake_abs.engine.rollout`: x (M, H + 1,
+        nx), u (M, H, nu)): rollout m is episode m, its step t the row (x_t, u_t, x_{t+1}).
+
+        Args:
+            trajectory: the run (its ``x`` and ``u``).
+            source, time_step: what simulated it, and seconds per step.
+            in_contact: states (N, nx) -> (N,) bool, whether the simulator has contact at each
+                state; a transition's ``contact`` is its value at x_t or at x_{t+1} (None: no
+                contact flags).
+            terminated: states (N, nx) -> (N,) bool; an episode ends with its first step whose
+                x_{t+1} is terminal (e.g. gymnasium's Hopper falling), its later steps left out
+                (None: every episode has its H steps).
+        """
+        x = np.asarray(trajectory.x, dtype=float)
+        u = np.asarray(trajectory.u, dtype=float)
+        if x.ndim != 3 or u.ndim != 3 or u.shape[:2] != (x.shape[0], x.shape[1] - 1):
+            raise ValueError(
+                "trajectory must have x (M, H + 1, nx) and u (M, H, nu); got x "
+                f"{x.shape}, u {u.shape}"
+            )
+        M, H, nx = u.shape[0], u.shape[1], x.shape[2]
+
+        def flags(fn, states: np.ndarray, name: str) -> np.ndarray:
+            out = np.asarray(fn(states.reshape(-1, nx)))
+            if out.shape != (states.shape[0] * states.shape[1],):
+                raise ValueError(f"{name}(states (N, nx)) must return (N,) flags; got {out.shape}")
+            return out.astype(bool).reshape(states.shape[:2])
+
+        lengths = np.full(M, H)
+        if terminated is not None:
+            ended = flags(terminated, x[:, 1:], "terminated")
+            lengths = np.where(ended.any(axis=1), ended.argmax(axis=1) + 1, H)
+        keep = np.arange(H)[None, :] < lengths[:, None]  # (M, H)
+        contact = None
+        if in_contact is not None:
+            touching = flags(in_contact, x, "in_contact")
+            contact = (touching[:, :-1] | touching[:, 1:])[keep]
+        return cls(
+            x=x[:, :-1][keep], u=u[keep], x_next=x[:, 1:][keep],
+            episode=np.repeat(np.arange(M), lengths), t=np.nonzero(keep)[1], source=source,
+            time_step=time_step, contact=contact,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------------------ sizes
 
@@ -358,4 +424,48 @@ def error_summary(data: Transitions, x_pred, nq: int, parts: dict | None = None)
             stats[f"{key}_mean"] = float(e[mask].mean()) if n else None
             stats[f"{key}_max"] = float(e[mask].max()) if n else None
         out[name] = stats
+    return out
+
+
+#: A transition is "near a joint limit" when a limited joint is within this (rad or m) of its
+#: limit at x or at x_next (the scenes' activation distance): a scene stepper's limits are hard,
+#: Drake's (SAP constraints, which act before the limit at speed) and MuJoCo's soft.
+NEAR_LIMIT = 0.1
+#: ... and "clear of the ground" when every contact point is at least this (m) above it at x
+#: and at x_next: closer, a speculative contact may hold a point the source lets sink.
+CLEARANCE = 1e-3
+
+
+def one_step_errors(
+    stepper, data: Transitions, *, near_limit: float = NEAR_LIMIT, clearance: float = CLEARANCE
+) -> dict:
+    """A scene stepper's one-step prediction errors on ``data``: ``stepper`` (a
+    :class:`~drake_abs.multibody.stepper.ComplementarityStepper`: its ``sizes``, ``limits`` and
+    ``model.distances`` are read) from each recorded (x, u), one state per call
+    (:func:`one_step_predictions`), against the recorded x_next.
+
+    Returns :func:`error_summary`'s parts (``all``; ``free`` and ``contact`` by the source's
+    contact flag; ``smooth``: free, every contact point clear of the ground by ``clearance`` m
+    and no joint within ``near_limit`` of a limit, at x and at x_next, where a rigid and a
+    compliant model step the same smooth dynamics), plus ``unconverged`` (steps whose contact
+    solve did not converge), ``seconds``, and per transition (N,) the errors ``q_err``,
+    ``v_err`` (the largest absolute entry error in q and in v) and the masks ``near_limit``,
+    ``clear``."""
+    start = time.perf_counter()
+    x_pred, converged = one_step_predictions(stepper, data)
+    nq = int(stepper.sizes[0])
+    q, q_next = data.x[:, :nq], data.x_next[:, :nq]
+    near = np.zeros(len(data), bool)
+    limits = getattr(stepper, "limits", None)
+    if limits is not None and limits.size:
+        near = np.minimum(limits.distances(q), limits.distances(q_next)).min(axis=1) < near_limit
+    distances = stepper.model.distances
+    clear = np.minimum(distances(q), distances(q_next)).min(axis=1) >= clearance
+    parts = {} if data.contact is None else {"smooth": ~data.contact & ~near & clear}
+    out = error_summary(data, x_pred, nq, parts)
+    err = np.abs(x_pred - data.x_next)
+    out["unconverged"] = int((~converged).sum())
+    out["seconds"] = time.perf_counter() - start
+    out["q_err"], out["v_err"] = err[:, :nq].max(axis=1), err[:, nq:].max(axis=1)
+    out["near_limit"], out["clear"] = near, clear
     return out
