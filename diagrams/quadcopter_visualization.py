@@ -26,8 +26,8 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_abs.multibody.builder import example_robot_data_dir
 from drake_abs.multibody.model_files import add_models_without_collisions
+from drake_abs.multibody.packages import example_robot_data_dir
 
 HECTOR_URDF = "hector_description/robots/quadrotor_base.urdf"
 PATH_COLORS = (

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.multibody import Scene
-from drake_abs.multibody.builder import resolve_model_file
+from drake_abs.multibody.parsing import resolve_model_file
 
 
 def contact_state(name: str, model) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,8 @@ and the batched complementarity step built on them (needs pydrake and pinocchio)
 Start from ``make_stepper("box_push")`` or ``build_scene_model(Scene.load("box_push"))``.
 """
 
-from drake_abs.multibody.builder import PACKAGE_DIR, SceneModel, build_scene_model, make_stepper
+from drake_abs.multibody.builder import SceneModel, build_scene_model, make_stepper
+from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.scene import ContactSpec, ModelSpec, Scene, shipped_scenes
 from drake_abs.multibody.stepper import ComplementarityStepper, StepOverflowWarning
 

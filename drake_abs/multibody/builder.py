@@ -3,209 +3,44 @@
 
 ``make_stepper(scene)`` (or ``build_scene_model(scene).stepper()``) is the one way to get a
 scene's batched step with every setting the scene names applied (smoothing policy, activation
-distance); arguments override a setting explicitly, nothing is copied by hand.
+distance); arguments override a setting explicitly, nothing is copied by hand. A stepper built
+here is picklable: it is sent as its scene and settings and rebuilt where it is unpickled
+(:func:`rebuild_stepper`).
+
+This module is the top of the scene modules of :mod:`drake_abs.multibody`; each imports only
+those below it: :mod:`~drake_abs.multibody.packages` (package resolution),
+:mod:`~drake_abs.multibody.model_files`, :mod:`~drake_abs.multibody.scene_entries`,
+:mod:`~drake_abs.multibody.parsing` (model files into a plant),
+:mod:`~drake_abs.multibody.contacts` (contact candidates), :mod:`~drake_abs.multibody.scene`.
+Run ``python -m drake_abs.multibody.builder SCENE...`` to print what a scene's plant holds
+(:func:`~drake_abs.multibody.model_files.model_report`).
 """
 
 from __future__ import annotations
 
-import difflib
-import functools
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.parsing import PackageMap, Parser
+from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import (
-    ModelInstanceIndex,
-    PrismaticJoint,
-    QuaternionFloatingJoint,
-    RevoluteJoint,
-    SpatialInertia,
-)
 
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.multibody.contacts import contact_candidates
 from drake_abs.multibody.drake_dynamics import (
     ContactModelBase,
     GroundPlane,
     MultibodyContactModel,
     PointContact,
 )
-from drake_abs.multibody.geometry_contacts import PairContact, Shape, ground_points, shape_of
-from drake_abs.multibody.model_files import add_models, apply_mjcf, model_report, read_mjcf
+from drake_abs.multibody.geometry_contacts import PairContact
+from drake_abs.multibody.model_files import format_model_report, model_report
+from drake_abs.multibody.parsing import add_model_specs
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
-from drake_abs.multibody.scene import ModelSpec, Scene
+from drake_abs.multibody.scene import Scene
 from drake_abs.multibody.stepper import ComplementarityStepper
-
-PACKAGE_DIR = Path(__import__("drake_abs").__file__).resolve().parent
-
-
-@functools.cache
-def example_robot_data_dir() -> Path:
-    """The installed example-robot-data share folder (…/share/example-robot-data)."""
-    import sys
-
-    for base in map(Path, sys.path):
-        for candidate in (
-            base / "cmeel.prefix/share/example-robot-data",
-            base / "share/example-robot-data",
-        ):
-            if (candidate / "robots").is_dir():
-                return candidate
-    prefix = Path(sys.prefix) / "share/example-robot-data"
-    if (prefix / "robots").is_dir():
-        return prefix
-    raise FileNotFoundError(
-        "example-robot-data is not installed (pip install example-robot-data): its robots/ "
-        "folder was not found under sys.path or sys.prefix"
-    )
-
-
-@functools.cache
-def gymnasium_assets_dir() -> Path:
-    """The installed gymnasium's MuJoCo model files (…/gymnasium/envs/mujoco/assets), found
-    without importing gymnasium."""
-    import importlib.util
-
-    found = importlib.util.find_spec("gymnasium")
-    if found is None or found.origin is None:
-        raise FileNotFoundError(
-            "gymnasium is not installed (pip install gymnasium): a model file "
-            "'package://gymnasium/<file>.xml' names one of its MuJoCo assets"
-        )
-    return Path(found.origin).parent / "envs" / "mujoco" / "assets"
-
-
-#: The model-file prefixes of earlier versions, still read as aliases of ``package://`` URIs
-#: (``drake_abs:models/box.sdf`` is ``package://drake_abs/models/box.sdf``). Write the URI.
-MODEL_FILE_ALIASES = {
-    "drake_abs:": "package://drake_abs/",
-    "example-robot-data:": "package://example-robot-data/robots/",
-    "gymnasium:": "package://gymnasium/",
-}
-
-
-def model_file_url(file: str) -> str | None:
-    """The ``package://`` URI a scene's model ``file`` names (an alias of
-    :data:`MODEL_FILE_ALIASES` rewritten), or None when ``file`` is a path on disk."""
-    if file.startswith("package://"):
-        return file
-    for alias, prefix in MODEL_FILE_ALIASES.items():
-        if file.startswith(alias):
-            return prefix + file[len(alias) :]
-    return None
-
-
-def package_folders() -> dict[str, Path]:
-    """A copy of :func:`_package_folders` (listed once per process)."""
-    return dict(_package_folders())
-
-
-@functools.cache
-def _package_folders() -> dict[str, Path]:
-    """The packages a scene's ``package://<package>/<path>`` may name, name -> folder:
-    ``drake_abs`` (this package's folder: ``models/``, ``scenes/``); when installed,
-    ``example-robot-data`` (its share folder: ``robots/<robot>_description/...``) and each of its
-    robots' own ``<robot>_description`` folders, and ``gymnasium`` (its MuJoCo model files,
-    ``gymnasium/envs/mujoco/assets``; found without importing gymnasium)."""
-    folders = {"drake_abs": PACKAGE_DIR}
-    try:
-        robot_data = example_robot_data_dir()
-    except FileNotFoundError:
-        pass
-    else:
-        folders["example-robot-data"] = robot_data
-        for robot in sorted((robot_data / "robots").iterdir()):
-            if robot.is_dir():
-                folders.setdefault(robot.name, robot)
-    try:
-        assets = gymnasium_assets_dir()
-    except FileNotFoundError:
-        pass
-    else:
-        if assets.is_dir():
-            folders["gymnasium"] = assets
-    return folders
-
-
-def register_packages(package_map: PackageMap) -> None:
-    """Add every package of :func:`package_folders` that ``package_map`` lacks (the model files
-    name their meshes by ``package://`` URIs too; a package already there is left as it is)."""
-    for name, folder in package_folders().items():
-        if not package_map.Contains(name):
-            package_map.Add(name, str(folder))
-
-
-def model_file_problem(file: str) -> str | None:
-    """What is wrong with a scene's model ``file`` before any file is opened: None for a path
-    on disk or a ``package://`` URI (or alias) of a known package; otherwise the reason, naming
-    the expected form and the known packages."""
-    url = model_file_url(file)
-    if url is None:
-        return None
-    package, slash, rest = url.removeprefix("package://").partition("/")
-    if not package or not slash or not rest:
-        return f"{file!r} is not of the form package://<package>/<path>"
-    folders = package_folders()
-    if package in folders:
-        return None
-    top = ("drake_abs", "example-robot-data", "gymnasium")
-    known = ", ".join(n for n in top if n in folders)
-    robots = [n for n in folders if n not in top]  # example-robot-data's robots/ folders
-    if robots:
-        shown = ", ".join(robots[:4] + ["..."] + robots[-1:] if len(robots) > 6 else robots)
-        known += (
-            f", and the {len(robots)} robot packages of example-robot-data, the folders of "
-            f"{folders['example-robot-data'] / 'robots'} ({shown})"
-        )
-    close = difflib.get_close_matches(package, list(folders), n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    missing = [
-        f"{name} is not installed (pip install {name})"
-        for name in ("example-robot-data", "gymnasium")
-        if name not in folders
-    ]
-    missing_text = f"; {'; '.join(missing)}" if missing else ""
-    return (
-        f"unknown package {package!r} in {file!r}{hint}; a model file is "
-        f"package://<package>/<path> with a known package: {known}{missing_text}"
-    )
-
-
-def resolve_package_file(file: str, where: str = "", what: str = "model file") -> Path:
-    """The file ``file`` names: ``package://<package>/<path>``, resolved through Drake's
-    ``PackageMap`` with the packages of :func:`package_folders` (for example
-    ``package://drake_abs/models/box_planar.sdf``,
-    ``package://example-robot-data/robots/go1_description/urdf/go1.urdf``,
-    ``package://gymnasium/hopper.xml``), an alias of one (:data:`MODEL_FILE_ALIASES`), or a path
-    on disk. ``ValueError`` (prefixed with ``where``) for an unknown package,
-    ``FileNotFoundError`` for a missing file (``what``: the kind of file, for the message)."""
-    url = model_file_url(file)
-    if url is None:
-        path = Path(file).expanduser()
-    else:
-        problem = model_file_problem(file)
-        if problem is not None:
-            raise ValueError(f"{where}: {problem}" if where else problem)
-        package, _, rest = url.removeprefix("package://").partition("/")
-        folder = package_folders()[package]
-        package_map = PackageMap.MakeEmpty()
-        package_map.Add(package, str(folder))
-        try:
-            path = Path(package_map.ResolveUrl(url))
-        except RuntimeError:  # Drake's: the URI resolves to a file that does not exist
-            path = folder / rest
-    if not path.is_file():
-        raise FileNotFoundError(f"{what} {file!r} not found (looked at {path})")
-    return path
-
-
-def resolve_model_file(spec: ModelSpec, where: str = "") -> Path:
-    """The model file a ModelSpec names (see :func:`resolve_package_file`); ``where`` (such as
-    ``"scene 'box_push': models[0].file"``) prefixes the message of an unknown package."""
-    return resolve_package_file(spec.file, where)
 
 
 @dataclass(frozen=True)
@@ -260,115 +95,17 @@ class SceneModel:
             self.scene.friction_model if friction is None else friction,
             **solver_options,
         )
-        stepper.scene = self.scene
+        stepper.scene, stepper.rebuild = self.scene, rebuild_stepper  # picklable
         return stepper
-
-
-def _parse(parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where: str):
-    """Parse one model file: its model instances, with the bodies its URDF ``floating`` joints
-    name given a quaternion floating joint of that name, at the joint's origin (see
-    :func:`add_floating_base_chains`); an MJCF file (``.xml``) checked and completed by
-    :func:`~drake_abs.multibody.model_files.read_mjcf` and
-    :func:`~drake_abs.multibody.model_files.apply_mjcf` (``spec.ignore``, ``spec.keyframe``)."""
-    mjcf = None
-    if path.suffix.lower() == ".xml":
-        try:
-            mjcf = read_mjcf(path, spec.ignore)
-        except ValueError as err:
-            raise ValueError(f"{where} ({spec.file}): {err}") from err
-    elif spec.ignore or spec.keyframe is not None:
-        raise ValueError(
-            f"{where}: ignore and keyframe apply to MuJoCo files (.xml) only; {spec.file!r} is "
-            "not one"
-        )
-    instances, floating = add_models(parser, path, collisions=collisions, mjcf=mjcf)
-    plant = parser.plant()
-    if mjcf is not None:
-        apply_mjcf(plant, instances[0], mjcf, spec.keyframe, where=f"{where} ({spec.file})")
-    for joint in floating:
-        body = plant.GetBodyByName(joint.link, instances[0])
-        added = plant.AddJoint(
-            QuaternionFloatingJoint(joint.name, plant.world_frame(), body.body_frame())
-        )
-        added.SetDefaultPose(RigidTransform(RollPitchYaw(joint.rpy), joint.xyz))
-    return instances
 
 
 def add_scene_models(
     plant: MultibodyPlant, scene: Scene, parser: Parser | None = None, *, collisions: bool = True
 ) -> None:
     """Parse the scene's models into ``plant`` (not finalized), with welds, actuators and
-    floating bases (a quaternion floating joint where a URDF declares a ``floating`` joint to
-    the world, :func:`add_floating_base_chains` for the other free bodies); ``collisions=False``
-    leaves the files' collision geometry out (and draws STL visuals through OBJ copies; see
-    :mod:`drake_abs.multibody.model_files`)."""
-    parser = parser or Parser(plant)
-    register_packages(parser.package_map())  # the files' own package:// URIs (meshes)
-    for i, spec in enumerate(scene.models):
-        where = f"scene {scene.name!r}: models[{i}]"
-        path = resolve_model_file(spec, where=f"{where}.file")
-        instances = _parse(parser, path, collisions, spec, where)
-        instance = instances[0]
-        if spec.name:
-            plant.RenameModelInstance(instance, spec.name)
-        if spec.weld:
-            plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.weld, instance))
-        for joint in spec.actuate:
-            plant.AddJointActuator(f"{joint}_actuator", plant.GetJointByName(joint, instance))
-    add_floating_base_chains(plant)
-
-
-#: The joints of a floating base, parent to child, with q = (x, y, z, yaw, pitch, roll) and v their
-#: rates, with the body's pose p = (x, y, z), R = Rz(yaw) Ry(pitch) Rx(roll).
-FLOATING_BASE_JOINTS = (
-    ("x", PrismaticJoint, (1.0, 0.0, 0.0)),
-    ("y", PrismaticJoint, (0.0, 1.0, 0.0)),
-    ("z", PrismaticJoint, (0.0, 0.0, 1.0)),
-    ("yaw", RevoluteJoint, (0.0, 0.0, 1.0)),
-    ("pitch", RevoluteJoint, (0.0, 1.0, 0.0)),
-    ("roll", RevoluteJoint, (1.0, 0.0, 0.0)),
-)
-
-
-def add_floating_base_chains(plant: MultibodyPlant) -> list[str]:
-    """Give every free root body of ``plant`` (not finalized) a floating base made of joints:
-    three prismatic and three revolute joints (:data:`FLOATING_BASE_JOINTS`) through massless
-    intermediate bodies, named ``<body>_x`` ... ``<body>_roll``. Its coordinates are positions
-    and Euler angles with ``qdot = v`` (the velocities are the angle rates, not the angular
-    velocity), so rigid-body libraries and the step's Jacobians need no quaternion or
-    angular-velocity map; like any roll-pitch-yaw parametrisation it is singular at
-    pitch = +-pi/2. Bodies that already have a joint from the world (such as the quaternion
-    floating joint a URDF ``floating`` joint asks for: see :func:`add_scene_models`) keep it.
-    Each chain's default positions place the body at its default pose from the model file (an
-    SDF link's ``<pose>``, an MJCF body's ``pos``/``quat``): x, y, z and the yaw, pitch and roll
-    of its orientation. Returns the names of the bodies given a floating base."""
-    inboard = {int(plant.get_joint(i).child_body().index()) for i in plant.GetJointIndices()}
-    roots = []
-    for k in range(plant.num_model_instances()):
-        instance = ModelInstanceIndex(k)
-        for i in plant.GetBodyIndices(instance):
-            body = plant.get_body(i)
-            if int(i) != int(plant.world_body().index()) and int(i) not in inboard:
-                roots.append(body)
-    for body in roots:
-        pose = plant.GetDefaultFloatingBaseBodyPose(body)
-        rpy = RollPitchYaw(pose.rotation())
-        default = (*pose.translation(), rpy.yaw_angle(), rpy.pitch_angle(), rpy.roll_angle())
-        parent = plant.world_body()
-        instance = body.model_instance()
-        for j, (name, kind, axis) in enumerate(FLOATING_BASE_JOINTS):
-            last = j == len(FLOATING_BASE_JOINTS) - 1
-            child = (
-                body
-                if last
-                else plant.AddRigidBody(f"{body.name()}_{name}", instance, SpatialInertia.Zero())
-            )
-            joint = plant.AddJoint(
-                kind(f"{body.name()}_{name}", parent.body_frame(), child.body_frame(), axis)
-            )
-            joint.set_default_positions([float(default[j])])
-            parent = child
-    return [b.name() for b in roots]
+    floating bases; ``collisions=False`` leaves the files' collision geometry out (see
+    :func:`~drake_abs.multibody.parsing.add_model_specs`)."""
+    add_model_specs(plant, scene.models, f"scene {scene.name!r}", parser, collisions=collisions)
 
 
 def _check_armature(model: PinocchioContactModel, plant: MultibodyPlant) -> None:
@@ -404,7 +141,7 @@ def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
     settings = dict(settings)
     parameters = settings.pop("parameters", None)
     stepper = ComplementarityStepper(model.contact_model, **settings)
-    stepper.scene = model.scene
+    stepper.scene, stepper.rebuild = model.scene, rebuild_stepper
     if parameters:
         stepper = stepper.with_parameters(parameters)
     return stepper
@@ -418,76 +155,9 @@ def make_stepper(scene: Scene | str | Path, **overrides) -> ComplementarityStepp
 
 
 def scene_contacts(scene: Scene) -> list[PointContact | PairContact]:
-    """The contact candidates of ``scene``, in its order: each ``contacts`` entry's listed
-    points, or its body's collision shapes as exact point candidates against the ground
-    (``geometry: collision``), then each ``pairs`` entry's unfiltered pairs of collision shapes.
-    Collision geometry is read from a plant built with a SceneGraph for the purpose (the step's
-    own plant has none)."""
-    needs_geometry = scene.pairs or any(c.geometry is not None for c in scene.contacts)
-    shapes = _CollisionShapes(scene) if needs_geometry else None
-    out: list[PointContact | PairContact] = []
-    for c in scene.contacts:
-        if c.geometry is None:
-            out.extend(PointContact(c.body, tuple(p), c.radius, c.friction, c.model)
-                       for p in c.points)  # fmt: skip
-            continue
-        for _, shape in shapes.of(c.body, c.model):
-            out.extend(PointContact(c.body, p, radius, c.friction, c.model)
-                       for p, radius in ground_points(shape))  # fmt: skip
-    for pair in scene.pairs:
-        found = [
-            PairContact(
-                pair.a, shape_a, pair.b, shape_b, pair.friction, pair.model_a, pair.model_b
-            )  # fmt: skip
-            for id_a, shape_a in shapes.of(pair.a, pair.model_a)
-            for id_b, shape_b in shapes.of(pair.b, pair.model_b)
-            if not shapes.inspector.CollisionFiltered(id_a, id_b)
-        ]
-        if not found:
-            raise ValueError(
-                f"scene {scene.name!r}: pair {pair.a!r}-{pair.b!r}: the model's collision "
-                "filters exclude every pair of their collision shapes"
-            )
-        out.extend(found)
-    return out
-
-
-class _CollisionShapes:
-    """The collision shapes of a scene's bodies (a plant and SceneGraph parsed for them)."""
-
-    def __init__(self, scene: Scene):
-        from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-        from pydrake.systems.framework import DiagramBuilder
-
-        self.scene = scene
-        self._builder = DiagramBuilder()
-        self.plant, scene_graph = AddMultibodyPlantSceneGraph(self._builder, 0.0)
-        add_scene_models(self.plant, scene, collisions=True)
-        self.plant.Finalize()
-        self.inspector = scene_graph.model_inspector()
-
-    def of(self, body_name: str, model: str | None) -> list[tuple[object, Shape]]:
-        """``[(geometry id, Shape)]`` of a body's collision geometry; ``ValueError`` for a body
-        without any, or with a shape other than a sphere, capsule or box."""
-        plant, where = self.plant, f"scene {self.scene.name!r}: body {body_name!r}"
-        instance = plant.GetModelInstanceByName(model) if model else None
-        body = (plant.GetBodyByName(body_name, instance) if instance is not None
-                else plant.GetBodyByName(body_name))  # fmt: skip
-        out = []
-        for gid in plant.GetCollisionGeometriesForBody(body):
-            found = shape_of(self.inspector, gid)
-            if found is None:
-                raise ValueError(
-                    f"{where}: collision shape {type(self.inspector.GetShape(gid)).__name__} "
-                    f"({self.inspector.GetName(gid)!r}) is not supported; spheres, capsules and "
-                    "boxes are (or list the body's contact points)"
-                )
-            X_BG = self.inspector.GetPoseInFrame(gid)
-            R = tuple(tuple(float(x) for x in row) for row in X_BG.rotation().matrix())
-            out.append((gid, Shape(found[0], found[1], tuple(X_BG.translation()), R)))
-        if not out:
-            raise ValueError(f"{where} has no collision geometry in its model file")
-        return out
+    """The contact candidates of ``scene``, in its order (see
+    :func:`~drake_abs.multibody.contacts.contact_candidates`)."""
+    return contact_candidates(f"scene {scene.name!r}", scene.models, scene.contacts, scene.pairs)
 
 
 def build_scene_model(scene: Scene | str | Path) -> SceneModel:
@@ -512,8 +182,9 @@ def build_scene_model(scene: Scene | str | Path) -> SceneModel:
                 raise
             model = MultibodyContactModel(*args)
     context = plant.CreateDefaultContext()
-    q0 = np.asarray(scene.initial_state.get("q", plant.GetPositions(context)), float)
-    v0 = np.asarray(scene.initial_state.get("v", plant.GetVelocities(context)), float)
+    q, v = scene.initial_state.q, scene.initial_state.v
+    q0 = np.asarray(plant.GetPositions(context) if q is None else q, float)
+    v0 = np.asarray(plant.GetVelocities(context) if v is None else v, float)
     if q0.shape != (plant.num_positions(),) or v0.shape != (plant.num_velocities(),):
         raise ValueError(
             f"scene {scene.name!r}: initial_state q and v must have {plant.num_positions()} and "
@@ -528,3 +199,20 @@ def build_scene_model(scene: Scene | str | Path) -> SceneModel:
             )
         q0[s : s + 4] /= norm
     return SceneModel(scene, plant, model, q0, v0)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m drake_abs.multibody.builder SCENE...``: print each scene's
+    :func:`~drake_abs.multibody.model_files.model_report` (a shipped scene's name or a YAML
+    path)."""
+    names = sys.argv[1:] if argv is None else argv
+    if not names:
+        raise SystemExit("usage: python -m drake_abs.multibody.builder SCENE [SCENE ...]")
+    for name in names:
+        model = build_scene_model(name)
+        print(f"scene {model.scene.name}:")
+        print(format_model_report(model.model_report()))
+
+
+if __name__ == "__main__":
+    main()

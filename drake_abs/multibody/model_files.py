@@ -635,23 +635,3 @@ def format_model_report(report: dict) -> str:
             f"  {a['name']:24s} {a['joint']:24s} {a['gear']:8.4g} {a['effort_limit']:13.6g}"
         )
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m drake_abs.multibody.model_files SCENE...``: print each scene's
-    :func:`model_report` (a shipped scene's name or a YAML path)."""
-    import sys
-
-    from drake_abs.multibody.builder import build_scene_model
-
-    names = sys.argv[1:] if argv is None else argv
-    if not names:
-        raise SystemExit("usage: python -m drake_abs.multibody.model_files SCENE [SCENE ...]")
-    for name in names:
-        model = build_scene_model(name)
-        print(f"scene {model.scene.name}:")
-        print(format_model_report(model.model_report()))
-
-
-if __name__ == "__main__":
-    main()

@@ -12,7 +12,7 @@ differ from Drake's: every quantity and derivative is mapped back to Drake's q =
 x, y, z) and v = (w, v) (in the parent frame), N(q) and dN included, so the state does not depend
 on the provider (:mod:`drake_abs.multibody.pinocchio_free_joints`; the quaternion is extended off
 the unit sphere as Drake's AutoDiffXd derivatives extend it). Other free bodies get a floating
-base made of joints (see :func:`drake_abs.multibody.builder.add_floating_base_chains`).
+base made of joints (see :func:`drake_abs.multibody.parsing.add_floating_base_chains`).
 
 :class:`PinocchioContactModel` has the interface of
 :class:`~drake_abs.multibody.drake_dynamics.MultibodyContactModel` and gives the same numbers

@@ -25,82 +25,39 @@ Example (YAML)::
     smoothing: {kind: contact_aware, mu_max: 1.0e-3, length: 0.02}
     initial_state: {q: [0, 0.1, 0], v: [1.0, 0, 0]}
 
-Keys (a file is read against the schema :class:`SceneFile`; ``[x, y, z]`` is a list of three
-numbers; lengths are in m, times in s, angles in rad; "text" is a YAML string):
+The keys, each with its form and meaning, are those of :class:`Scene` and of its entries:
+:class:`~drake_abs.multibody.scene_entries.ModelSpec`,
+:class:`~drake_abs.multibody.scene_entries.ContactSpec`,
+:class:`~drake_abs.multibody.scene_entries.PairSpec`, :class:`InitialState` and the kinds of
+smoothing. Each key is stated once, as a field of these dataclasses (its annotation, its default,
+and :func:`~drake_abs.multibody.scene_entries.key`'s form and explanation).
 
-``name`` (required)
-    text: the scene's name.
-``models`` (required)
-    a list of model entries, each a mapping:
+Smoothing is a union by kind: :class:`ExactSmoothing` | :class:`FixedSmoothing` |
+:class:`ContactAwareSmoothing` | :class:`GaussianMatchedSmoothing`. A file writes it as a plain
+mapping whose ``kind`` names the member (``{kind: fixed, value: 1.0e-4}``; no ``kind``: exact), as
+do :meth:`Scene.from_dict`, :meth:`Scene.to_dict` and the constructor (which also takes the
+member itself). At the boundary to Drake's reader, ``kind`` becomes the YAML tag that selects the
+union's member (``!FixedSmoothing {value: 1.0e-4}``); scene files themselves carry no tags.
 
-    - ``file`` (required): the model file (URDF, SDF or MJCF, used as published: see README,
-      "Model files as published"): ``package://<package>/<path>`` (below), or a path on disk
-      (absolute, or relative to the working directory).
-    - ``name``: text, the model instance's name (default: the file's).
-    - ``weld``: text, a frame of the model welded to the world at the origin (default: none,
-      the model's root body floats).
-    - ``actuate``: a list of joint names (text), each given an actuator (for URDFs without
-      ``<transmission>`` tags).
-    - ``keyframe`` (MuJoCo files only): text, the name of a ``<keyframe>`` ``<key>`` whose qpos
-      gives the default joint positions.
-    - ``ignore`` (MuJoCo files only): a list of the file's attributes that may be dropped, some
-      of ``joint.stiffness``, ``joint.frictionloss``, ``joint.armature``.
-``contacts``
-    a list of contact entries against the ground, each a mapping:
+How a scene is read, whatever made it (a file, :meth:`Scene.from_dict`, the constructor):
 
-    - ``body`` (required): text, the body's name.
-    - ``points``: a list of points ``[x, y, z]`` (m, in the body's frame).
-    - ``geometry``: ``collision``, instead of ``points``: the body's collision shapes in its
-      model file (spheres, capsules, boxes).
-    - ``radius``: a number >= 0, the radius of the sphere at each point (m; default 0).
-    - ``friction``: a number >= 0, the Coulomb friction coefficient, or ``null`` (the
-      default) for frictionless contact.
-    - ``model``: text, the body's model instance (when its name is not unique).
-``pairs``
-    a list of body-body entries, each a mapping: ``a``, ``b`` (required): text, the bodies'
-    names; ``friction``: as in ``contacts``; ``model_a``, ``model_b``: text, their model
-    instances.
-``time_step``
-    a number > 0: the step h (s; default 0.01).
-``friction_directions``
-    an integer >= 2: tangent directions per frictional contact (default 4; 2 for planar
-    scenes).
-``ground_normal``, ``ground_height``
-    ``[nx, ny, nz]``, not all zero (default ``[0, 0, 1]``), and a number (m; default 0): the
-    ground is the half-space ``n . p >= height``.
-``activation_distance``
-    a number > 0: contacts farther than this are left out of a step's LCP (m; default
-    ``.inf``: none).
-``smoothing``
-    a mapping: ``kind``, one of ``exact`` (the default), ``fixed`` (parameter ``value``, mu in
-    m N s), ``contact_aware`` (``mu_max``, ``mu_min``: m N s; ``length``: m) or
-    ``gaussian_matched`` (``sigma``: m; ``c1``, ``c2``), and optionally
-    ``reference_time_step``: a number > 0, the step mu is stated at (s). See
-    :attr:`Scene.smoothing`.
-``initial_state``
-    a mapping ``{q: [...], v: [...]}``: lists of numbers, the plant's positions (m, rad) and
-    velocities (m/s, rad/s) (default: the plant's default state).
-``dynamics``
-    one of ``auto`` (the default), ``pinocchio``, ``drake``.
-``friction_model``
-    one of ``stewart_trinkle`` (the default), ``anitescu``.
+1. its values are checked against the fields' annotations (known and required keys, text,
+   numbers, lists and their lengths, allowed values): a ``ValueError`` names the key (such as
+   ``contacts[0].points[1]``) and the expected form, and for a file the file and the line;
+2. Drake's ``yaml_load_typed`` reads them into the typed dataclasses (mutable twins of these,
+   made from their fields, which Drake's reader fills in; tuples become lists there);
+3. the frozen :class:`Scene` holds the result and checks what types cannot say (ranges,
+   finiteness, points or geometry, the smoothing's parameters).
 
-A key the schema does not know, a value of the wrong form or a missing required key is a
-``ValueError`` that names the file, its line, the key (such as ``contacts[0].points[1]``) and
-the expected form. Root keys starting with ``_`` are ignored (for YAML anchors).
-
-Model files: ``package://<package>/<path>`` is resolved through Drake's ``PackageMap``, with
-the packages ``drake_abs`` (this package's folder: ``package://drake_abs/models/<file>``),
-``example-robot-data`` (``package://example-robot-data/robots/<robot>_description/...``, the
-form the robots' own URDFs use for their meshes; each ``<robot>_description`` is a package
-too) and ``gymnasium`` (its MuJoCo model files: ``package://gymnasium/hopper.xml``), the last
-two when installed. The prefixes of earlier versions, ``drake_abs:<path>``,
-``example-robot-data:<path>`` (under ``robots/``) and ``gymnasium:<file>``, are still read as
-aliases of these URIs.
+Step 1 is stricter than Drake's reader, which would take the text ``'0.01'`` for a number, and
+its messages name the key and the line. Root keys of a file that start with ``_`` are ignored
+(for YAML anchors). Model files are named by ``package://`` URIs or paths (see
+:mod:`drake_abs.multibody.packages`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import functools
 import numbers
@@ -108,13 +65,13 @@ import re
 import types
 import typing
 from collections.abc import Mapping
-from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass, replace
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import yaml
-from pydrake.common.yaml import yaml_load_typed
+from pydrake.common.yaml import yaml_dump, yaml_load_typed
 
 from drake_abs.contact.contact_lcp import FORMULATIONS
 from drake_abs.contact.smoothing import (
@@ -125,74 +82,19 @@ from drake_abs.contact.smoothing import (
     SmoothingPolicy,
     TimeStepScaled,
 )
-from drake_abs.multibody.model_files import IGNORABLE
-
-_SMOOTHING = {
-    "exact": Exact,
-    "fixed": Fixed,
-    "contact_aware": ContactAware,
-    "gaussian_matched": GaussianMatched,
-}
-
-
-# ---------------------------------------------------------------------------------------------
-# type checks: every wrongly typed value names its key (``where`` is "scene 'name'")
-
-
-def _is_number(value) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
-
-
-def _number(value, where: str, key: str, unit: str = "", *, optional: bool = False):
-    """``value`` as a float, or ``ValueError`` naming ``key`` (booleans and strings are not
-    numbers); None stays None when ``optional``."""
-    if optional and value is None:
-        return None
-    if not _is_number(value):
-        unit = f" ({unit})" if unit else ""
-        null = " or null" if optional else ""
-        raise ValueError(f"{where}: {key} must be a number{unit}{null}; got {value!r}")
-    return float(value)
-
-
-def _numbers(value, where: str, key: str, form: str, size: int | None = None) -> tuple:
-    """``value`` (a list of numbers, of ``size`` entries if given) as a tuple of floats."""
-    ok = isinstance(value, list | tuple | np.ndarray) and (size is None or len(value) == size)
-    if ok and isinstance(value, np.ndarray):
-        ok = value.ndim == 1
-    if not ok or not all(_is_number(x) for x in value):
-        raise ValueError(f"{where}: {key} must be a list of {form}; got {value!r}")
-    return tuple(float(x) for x in value)
-
-
-def _text(value, where: str, key: str, form: str, *, optional: bool = False):
-    if not (isinstance(value, str) or (optional and value is None)):
-        null = " or null" if optional else ""
-        raise ValueError(f"{where}: {key} must be a string ({form}){null}; got {value!r}")
-    return value
-
-
-def _mapping(value, where: str, key: str, form: str) -> dict:
-    if not isinstance(value, Mapping):
-        raise ValueError(f"{where}: {key} must be a mapping ({form}); got {value!r}")
-    return dict(value)
-
-
-class _SceneLoader(yaml.SafeLoader):
-    """YAML's safe loader, except that exponent-only numbers such as ``1e-3`` are numbers (as in
-    YAML 1.2; PyYAML follows YAML 1.1 and reads them as strings, which the type checks would
-    reject)."""
-
-
-_SceneLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?[0-9][0-9_]*(\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
+from drake_abs.multibody.contacts import contact_candidates
+from drake_abs.multibody.packages import PACKAGE_DIR, model_file_problem, resolve_package_file
+from drake_abs.multibody.scene_entries import (
+    ContactSpec,
+    ModelSpec,
+    PairSpec,
+    documented,
+    is_required,
+    key,
 )
 
-
 #: The folder of the scenes shipped with the package.
-SCENES_DIR = Path(__file__).resolve().parents[1] / "scenes"
+SCENES_DIR = PACKAGE_DIR / "scenes"
 
 
 def shipped_scenes() -> list[str]:
@@ -204,355 +106,317 @@ def shipped_scenes() -> list[str]:
 DYNAMICS = ("auto", "pinocchio", "drake")
 
 
-@dataclass(frozen=True)
-class ModelSpec:
-    """One model file. ``weld``: a frame of the model welded to the world at the origin (a fixed
-    base); otherwise its root body floats: q = (x, y, z, yaw, pitch, roll), v their rates (a
-    chain of joints: ``drake_abs.multibody.builder.add_floating_base_chains``).
-    ``actuate``: joints to give an actuator (for URDFs without ``<transmission>`` tags).
-    The root body's pose in the file (an SDF ``<pose>``, an MJCF body's ``pos``/``quat``, a URDF
-    ``floating`` joint's ``<origin>``) is its default pose: the scene's initial q when
-    ``initial_state`` gives none.
-
-    MuJoCo files (``.xml``) only: ``keyframe``, the name of a ``<keyframe>`` ``<key>`` whose
-    qpos gives the default joint positions (unnamed keys by index, ``"0"``); ``ignore``, the
-    file's attributes the step does not model that may be dropped, from
-    :data:`drake_abs.multibody.model_files.IGNORABLE` (``joint.stiffness``,
-    ``joint.frictionloss``, ``joint.armature``): a file that has them is refused otherwise."""
-
-    file: str
-    name: str | None = None
-    weld: str | None = None
-    actuate: tuple[str, ...] = ()
-    keyframe: str | None = None
-    ignore: tuple[str, ...] = ()
-
-
-#: Where ``ContactSpec.geometry`` may take a body's contact candidates from.
-GEOMETRY_SOURCES = ("collision",)
+# ---------------------------------------------------------------------------------------------
+# smoothing: a union by kind
 
 
 @dataclass(frozen=True)
-class ContactSpec:
-    """Contact candidates on one body against the ground: ``points`` (m, body frame), each a
-    sphere of ``radius`` (m; 0 for a point), or ``geometry: collision``: the body's collision
-    shapes in its model file, as exact point candidates (spheres: their centre and radius;
-    capsules: their two end-cap centres and radius; boxes: their 8 vertices; see
-    :mod:`drake_abs.multibody.geometry_contacts`). ``friction`` the Coulomb coefficient, or None
-    for frictionless contact."""
+class _Smoothing:
+    """What every kind of smoothing has: its ``kind`` (the name a file gives), the policy it
+    makes, and the time step mu is stated at."""
 
-    body: str
-    points: tuple[tuple[float, float, float], ...] = ()
-    radius: float = 0.0
-    friction: float | None = None
-    model: str | None = None
-    geometry: str | None = None
+    kind: ClassVar[str]
+    policy_type: ClassVar[type[SmoothingPolicy]]
+
+    reference_time_step: float | None = key(
+        "a number > 0: the time step mu is stated at (s), or null",
+        "Default: the scene's ``time_step``. At another ``time_step`` mu is multiplied by "
+        "``time_step / reference_time_step`` "
+        "(:class:`~drake_abs.contact.smoothing.TimeStepScaled`), so that a resting body's "
+        "barrier gap and the barrier's force law stay those of the reference step (mu is an "
+        "impulse times a distance, m N s: at a fixed mu the rest gap grows like 1 / h). Not for "
+        "``gaussian_matched``",
+        default=None,
+        kw_only=True,
+    )
+
+    def policy(self) -> SmoothingPolicy:
+        """The smoothing policy, at the reference time step (``ValueError`` for parameters it
+        refuses)."""
+        own = {f.name: getattr(self, f.name) for f in fields(self)}
+        del own["reference_time_step"]
+        return self.policy_type(**own)
 
 
+@documented
 @dataclass(frozen=True)
-class PairSpec:
-    """Body-body contact candidates: every pair of collision shapes of bodies ``a`` and ``b``
-    (from their model files) that the model's collision filters leave in, evaluated in closed
-    form (sphere-sphere, sphere-box, sphere-capsule; see
-    :mod:`drake_abs.multibody.geometry_contacts`). ``friction`` the Coulomb coefficient (None:
-    frictionless); ``model_a``, ``model_b`` the bodies' model instances (None: unique names).
-    Only ``dynamics: drake`` (or ``auto``, which then uses Drake) evaluates pairs."""
+class ExactSmoothing(_Smoothing):
+    """``kind: exact``, the default: hard contact (:class:`~drake_abs.contact.smoothing.Exact`)."""
 
-    a: str
-    b: str
-    friction: float | None = None
-    model_a: str | None = None
-    model_b: str | None = None
+    kind = "exact"
+    policy_type = Exact
 
 
+@documented
+@dataclass(frozen=True)
+class FixedSmoothing(_Smoothing):
+    """``kind: fixed``: the same mu for every contact
+    (:class:`~drake_abs.contact.smoothing.Fixed`); larger is smoother."""
+
+    kind = "fixed"
+    policy_type = Fixed
+
+    value: float = key("a number >= 0: mu of kind fixed (m N s)")
+
+
+@documented
+@dataclass(frozen=True)
+class ContactAwareSmoothing(_Smoothing):
+    """``kind: contact_aware``: mu from the distance of the nearest inactive contact
+    (:class:`~drake_abs.contact.smoothing.ContactAware`)."""
+
+    kind = "contact_aware"
+    policy_type = ContactAware
+
+    mu_max: float = key("a number > 0: contact_aware's mu at contact (m N s)")
+    length: float = key("a number > 0: contact_aware's decay length (m)")
+    mu_min: float = key("a number >= 0: contact_aware's mu far away (m N s)", default=0.0)
+
+
+@documented
+@dataclass(frozen=True)
+class GaussianMatchedSmoothing(_Smoothing):
+    """``kind: gaussian_matched``: per-contact mu matched to Gaussian randomised smoothing
+    (:class:`~drake_abs.contact.smoothing.GaussianMatched`); a larger sigma is smoother."""
+
+    kind = "gaussian_matched"
+    policy_type = GaussianMatched
+
+    sigma: float = key("a number > 0: gaussian_matched's noise scale (m)")
+    c1: float = key("a number: gaussian_matched's c1", default=0.0)
+    c2: float = key("a number: gaussian_matched's c2", default=0.0)
+
+
+#: The smoothing of a scene, a union by kind (the type of :attr:`Scene.smoothing`).
+SmoothingSpec = ExactSmoothing | FixedSmoothing | ContactAwareSmoothing | GaussianMatchedSmoothing
+
+#: The kinds of smoothing a scene names, by ``kind``.
+SMOOTHING_KINDS: dict[str, type[_Smoothing]] = {k.kind: k for k in typing.get_args(SmoothingSpec)}
+
+
+@documented
+@dataclass(frozen=True)
+class InitialState:
+    """A scene's initial state; a part left out is the plant's default (positions from the
+    model files, at rest)."""
+
+    q: tuple[float, ...] | None = key("a list of numbers: the positions (m, rad)", default=None)
+    v: tuple[float, ...] | None = key(
+        "a list of numbers: the velocities (m/s, rad/s)", default=None
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the scene
+
+
+@documented
 @dataclass(frozen=True)
 class Scene:
-    """A complementarity scene.
+    """A complementarity scene. Made from a file (:meth:`load`, :meth:`from_yaml`), from plain
+    data (:meth:`from_dict`) or by the constructor, whose entries may be plain mappings too
+    (``smoothing={"kind": "fixed", "value": 1e-4}``); every value is checked, numbers stored as
+    floats and lists as tuples (see the module docstring). ``ValueError`` names the key."""
 
-    Attributes:
-        name: identifier.
-        models: the model files.
-        contacts: the contact candidates against the ground.
-        pairs: the body-body contact candidates (:class:`PairSpec`). The step's plant has
-            exactly the contacts and pairs listed, and no others.
-        time_step: h in s.
-        friction_directions: k, tangent directions per frictional contact (2 for planar scenes).
-        ground_normal, ground_height: the ground half-space ``n . p >= height``.
-        activation_distance: contacts whose distance exceeds this (m) are left out of a step's
-            LCP. Under exact contact this changes nothing; under smoothing it drops their force
-            at a distance (about mu / distance each) and, for ContactAware, their say in mu.
-        smoothing: ``{"kind": "exact" | "fixed" | "contact_aware" | "gaussian_matched", ...}``
-            with the policy's parameters; larger mu is smoother. Optional
-            ``reference_time_step`` (s): the step mu was stated at (default: ``time_step``).
-            At another ``time_step`` mu is multiplied by ``time_step / reference_time_step``
-            (:class:`~drake_abs.contact.smoothing.TimeStepScaled`), so that a resting body's
-            barrier gap and the barrier's force law stay those of the reference step (mu is an
-            impulse times a distance, m N s: at a fixed mu the rest gap grows like 1 / h).
-            Not for ``gaussian_matched``.
-        initial_state: ``{"q": [...], "v": [...]}`` (defaults: the plant's default state).
-        dynamics: who evaluates M, the bias terms, the contact Jacobians and their derivatives:
-            ``"pinocchio"`` (analytic derivatives; revolute, prismatic and weld joints, which
-            includes this package's floating bases), ``"drake"`` (the MultibodyPlant itself,
-            AutoDiffXd for derivatives; any joint), or ``"auto"`` (pinocchio where it applies).
-            Both give the same numbers (tested); pinocchio is much faster.
-        friction_model: ``"stewart_trinkle"`` (the papers' linearised-cone LCP; exact Coulomb
-            friction, but not monotone: under smoothing its solves can fail) or
-            ``"anitescu"`` (the convex relaxation: a monotone LCP that converges under every
-            smoothing; a sliding contact lifts off at ``friction x |v_t|``). See
-            :class:`drake_abs.contact.contact_lcp.FrictionCone` and docs/math.md section 6b.
-    """
-
-    name: str
-    models: tuple[ModelSpec, ...]
-    contacts: tuple[ContactSpec, ...] = ()
-    pairs: tuple[PairSpec, ...] = ()
-    time_step: float = 0.01
-    friction_directions: int = 4
-    ground_normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    ground_height: float = 0.0
-    activation_distance: float = float("inf")
-    smoothing: dict = field(default_factory=lambda: {"kind": "exact"})
-    initial_state: dict = field(default_factory=dict)
-    dynamics: str = "auto"
-    friction_model: str = "stewart_trinkle"
+    name: str = key("the scene's name (text)")
+    models: tuple[ModelSpec, ...] = key(
+        "a list of model entries, each {file: package://<package>/<path>, ...}",
+        "The model files (:class:`~drake_abs.multibody.scene_entries.ModelSpec`); one at least",
+        item="a model entry: a mapping {file: ..., name: ..., weld: ..., ...}",
+    )
+    contacts: tuple[ContactSpec, ...] = key(
+        "a list of contact entries, each {body: ..., points: [[x, y, z], ...], ...}",
+        "The contact candidates against the ground "
+        "(:class:`~drake_abs.multibody.scene_entries.ContactSpec`). The step's plant has "
+        "exactly the contacts and pairs listed, and no others; one at least",
+        default=(),
+        item="a contact entry: a mapping {body: ..., points: [[x, y, z], ...], radius: ..., "
+        "friction: ...} or {body: ..., geometry: collision, friction: ...}",
+    )
+    pairs: tuple[PairSpec, ...] = key(
+        "a list of pair entries, each {a: <body>, b: <body>, friction: ...}",
+        "The body-body contact candidates (:class:`~drake_abs.multibody.scene_entries.PairSpec`)",
+        default=(),
+        item="a pair entry: a mapping {a: <body>, b: <body>, friction: ...}",
+    )
+    time_step: float = key("a number > 0: the time step (s)", "The step h", default=0.01)
+    friction_directions: int = key(
+        "an integer >= 2: tangent directions per frictional contact",
+        "k; 2 for planar scenes (+-x only)",
+        default=4,
+    )
+    ground_normal: tuple[float, float, float] = key(
+        "[nx, ny, nz]: 3 numbers, not all zero",
+        "The ground is the half-space ``n . p >= ground_height``",
+        default=(0.0, 0.0, 1.0),
+    )
+    ground_height: float = key("a number: the ground's height (m)", default=0.0)
+    activation_distance: float = key(
+        "a number > 0 (m), or .inf for none",
+        "Contacts whose distance exceeds this are left out of a step's LCP. Under exact contact "
+        "this changes nothing; under smoothing it drops their force at a distance (about "
+        "mu / distance each) and, for ContactAware, their say in mu",
+        default=float("inf"),
+    )
+    smoothing: SmoothingSpec = key(
+        f"a mapping {{kind: one of {sorted(SMOOTHING_KINDS)}, <the kind's parameters>}}",
+        "The smoothing policy (:meth:`smoothing_policy`), a member of the union named by "
+        "``kind``: :class:`ExactSmoothing` (the default, and when ``kind`` is left out), "
+        ":class:`FixedSmoothing`, :class:`ContactAwareSmoothing` or "
+        ":class:`GaussianMatchedSmoothing`, each with its parameters; larger mu is smoother",
+        default=ExactSmoothing(),
+    )
+    initial_state: InitialState = key(
+        "a mapping {q: [...], v: [...]}",
+        "The initial state (:class:`InitialState`; default: the plant's default state)",
+        default=InitialState(),
+    )
+    dynamics: str = key(
+        f"one of {list(DYNAMICS)}",
+        "Who evaluates M, the bias terms, the contact Jacobians and their derivatives: "
+        '``"pinocchio"`` (analytic derivatives; revolute, prismatic and weld joints, which '
+        'includes this package\'s floating bases), ``"drake"`` (the MultibodyPlant itself, '
+        'AutoDiffXd for derivatives; any joint), or ``"auto"`` (pinocchio where it applies). '
+        "Both give the same numbers (tested); pinocchio is much faster",
+        default="auto",
+        choices=DYNAMICS,
+    )
+    friction_model: str = key(
+        f"one of {list(FORMULATIONS)}",
+        '``"stewart_trinkle"`` (the papers\' linearised-cone LCP; exact Coulomb friction, but '
+        'not monotone: under smoothing its solves can fail) or ``"anitescu"`` (the convex '
+        "relaxation: a monotone LCP that converges under every smoothing; a sliding contact "
+        "lifts off at ``friction x |v_t|``). See "
+        ":class:`drake_abs.contact.contact_lcp.FrictionCone` and docs/math.md section 6b",
+        default="stewart_trinkle",
+        choices=FORMULATIONS,
+    )
 
     def __post_init__(self):
-        self._check_types()
-        if self.friction_model not in FORMULATIONS:
-            raise ValueError(
-                f"scene {self.name!r}: friction_model must be one of {FORMULATIONS}; got "
-                f"{self.friction_model!r}"
-            )
-        if self.dynamics not in DYNAMICS:
-            raise ValueError(
-                f"scene {self.name!r}: dynamics must be one of {DYNAMICS}; got {self.dynamics!r}"
-            )
+        where = f"scene {self.name!r}" if isinstance(self.name, str) else "scene"
+        try:
+            self._read()
+            self._check_values()
+        except _Problem as problem:
+            raise ValueError(f"{where}: {problem.message}") from problem
+
+    def _read(self) -> None:
+        """Check every value against its annotation, read them all with Drake's
+        ``yaml_load_typed`` and hold the result (steps 1 and 2 of the module docstring)."""
+        hints = _hints(Scene)
+        plain = {f.name: _plain(getattr(self, f.name), hints[f.name], f.name, f.metadata)
+                 for f in fields(Scene)}  # fmt: skip
+        typed = yaml_load_typed(
+            schema=_SceneFile,
+            data=yaml_dump(plain),
+            allow_yaml_with_no_schema=False,
+            allow_schema_with_no_yaml=False,
+            retain_map_defaults=False,
+        )
+        for f in fields(Scene):
+            object.__setattr__(self, f.name, _frozen(getattr(typed, f.name), hints[f.name]))
+
+    def _check_values(self) -> None:
+        """``_Problem`` for a value its type allows and the scene does not."""
         if not self.models:
-            raise ValueError(f"scene {self.name!r}: models must list at least one model file")
+            raise _Problem("models", "models must list at least one model file")
         if not self.contacts and not self.pairs:
-            raise ValueError(
-                f"scene {self.name!r}: contacts or pairs must list at least one candidate"
-            )
+            raise _Problem("contacts", "contacts or pairs must list at least one candidate")
         if not (np.isfinite(self.time_step) and self.time_step > 0):
-            raise ValueError(
-                f"scene {self.name!r}: time_step must be a number > 0 (s); got {self.time_step}"
-            )
-        if int(self.friction_directions) < 2:
-            raise ValueError(
-                f"scene {self.name!r}: friction_directions must be an integer >= 2; got "
-                f"{self.friction_directions}"
+            raise _Problem("time_step", f"time_step must be a number > 0 (s); got {self.time_step}")
+        k = self.friction_directions
+        if k < 2:
+            raise _Problem(
+                "friction_directions", f"friction_directions must be an integer >= 2; got {k}"
             )
         if not self.activation_distance > 0:
-            raise ValueError(
-                f"scene {self.name!r}: activation_distance must be a number > 0 (m; .inf for "
-                f"none); got {self.activation_distance}"
+            raise _Problem(
+                "activation_distance",
+                "activation_distance must be a number > 0 (m; .inf for none); got "
+                f"{self.activation_distance}",
             )
         for i, c in enumerate(self.pairs):
             if c.friction is not None and not (np.isfinite(c.friction) and c.friction >= 0):
-                raise ValueError(f"scene {self.name!r}: pairs[{i}].friction must be a finite "
-                                 f"number >= 0 or null (pair {c.a!r}-{c.b!r}); got "
-                                 f"{c.friction!r}")  # fmt: skip
+                at = f"pairs[{i}].friction"
+                raise _Problem(
+                    at,
+                    f"{at} must be a finite number >= 0 or null (pair {c.a!r}-{c.b!r}); got "
+                    f"{c.friction!r}",
+                )
         for i, c in enumerate(self.contacts):
-            key = f"contacts[{i}]"
-            if c.geometry is not None:
-                if c.geometry not in GEOMETRY_SOURCES:
-                    raise ValueError(
-                        f"scene {self.name!r}: {key}.geometry must be one of "
-                        f"{list(GEOMETRY_SOURCES)} (body {c.body!r}); got {c.geometry!r}"
-                    )
-                if c.points or c.radius != 0.0:
-                    raise ValueError(
-                        f"scene {self.name!r}: {key} (body {c.body!r}): give points (and "
-                        "radius) or geometry, not both"
-                    )
-            elif not c.points:
-                raise ValueError(
-                    f"scene {self.name!r}: {key} (body {c.body!r}) lists no points (or "
-                    "geometry): give points, a list of [x, y, z] (m, in the body's frame), or "
-                    "geometry: collision"
+            at = f"contacts[{i}]"
+            if c.geometry is not None and (c.points or c.radius != 0.0):
+                raise _Problem(
+                    at, f"{at} (body {c.body!r}): give points (and radius) or geometry, not both"
+                )
+            if c.geometry is None and not c.points:
+                raise _Problem(
+                    at,
+                    f"{at} (body {c.body!r}) lists no points (or geometry): give points, a list "
+                    "of [x, y, z] (m, in the body's frame), or geometry: collision",
                 )
             for j, p in enumerate(c.points):
-                if len(p) != 3 or not np.all(np.isfinite(np.asarray(p, float))):
-                    raise ValueError(
-                        f"scene {self.name!r}: {key}.points[{j}] must be 3 finite coordinates "
-                        f"[x, y, z] in m (body {c.body!r}); got {list(p)}"
+                if not np.all(np.isfinite(p)):
+                    point = f"{at}.points[{j}]"
+                    raise _Problem(
+                        point,
+                        f"{point} must be 3 finite coordinates [x, y, z] in m (body "
+                        f"{c.body!r}); got {list(p)}",
                     )
             if not (np.isfinite(c.radius) and c.radius >= 0):
-                raise ValueError(f"scene {self.name!r}: {key}.radius must be a finite number "
-                                 f">= 0 (m; body {c.body!r}); got {c.radius!r}")  # fmt: skip
+                raise _Problem(
+                    f"{at}.radius",
+                    f"{at}.radius must be a finite number >= 0 (m; body {c.body!r}); got "
+                    f"{c.radius!r}",
+                )
             if c.friction is not None and not (np.isfinite(c.friction) and c.friction >= 0):
-                raise ValueError(f"scene {self.name!r}: {key}.friction must be a finite number "
-                                 f">= 0 or null (body {c.body!r}); got {c.friction!r}")  # fmt: skip
+                raise _Problem(
+                    f"{at}.friction",
+                    f"{at}.friction must be a finite number >= 0 or null (body {c.body!r}); "
+                    f"got {c.friction!r}",
+                )
         if not np.isfinite(self.ground_height):
-            raise ValueError(
-                f"scene {self.name!r}: ground_height must be finite (m); got {self.ground_height}"
+            raise _Problem(
+                "ground_height", f"ground_height must be finite (m); got {self.ground_height}"
             )
-        n = np.asarray(self.ground_normal, float)
-        if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-12:
-            raise ValueError(
-                f"scene {self.name!r}: ground_normal must be 3 finite numbers, not all zero; "
-                f"got {list(self.ground_normal)}"
+        n = np.asarray(self.ground_normal)
+        if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-12:
+            raise _Problem(
+                "ground_normal",
+                f"ground_normal must be 3 finite numbers, not all zero; got {list(n)}",
             )
-        unknown = set(self.initial_state) - {"q", "v"}
-        if unknown:
-            raise ValueError(
-                f"scene {self.name!r}: initial_state may set q and v only; got {sorted(unknown)}"
-            )
-        for key, values in self.initial_state.items():
-            if not np.all(np.isfinite(np.asarray(values, float))):
-                raise ValueError(
-                    f"scene {self.name!r}: initial_state.{key} must be a list of finite numbers"
-                )
-        self.smoothing_policy()  # validates the smoothing parameters now, not at the first step
-
-    def _check_types(self) -> None:
-        """Raise ``ValueError`` naming the key of any wrongly typed value; store numbers as
-        floats and lists as tuples (a scene from YAML or from the constructor alike)."""
-        if not isinstance(self.name, str):
-            raise ValueError(f"scene name must be a string; got {self.name!r}")
-        where = f"scene {self.name!r}"
-        put = functools.partial(object.__setattr__, self)
-        put("time_step", _number(self.time_step, where, "time_step", "s"))
-        k = self.friction_directions
-        if not (isinstance(k, numbers.Integral) and not isinstance(k, bool)):
-            raise ValueError(
-                f"{where}: friction_directions must be an integer >= 2 (tangent directions "
-                f"per contact); got {k!r}"
-            )
-        put("friction_directions", int(k))
-        put(
-            "ground_normal",
-            _numbers(self.ground_normal, where, "ground_normal", "3 numbers [nx, ny, nz]", 3),
-        )
-        put("ground_height", _number(self.ground_height, where, "ground_height", "m"))
-        put(
-            "activation_distance",
-            _number(self.activation_distance, where, "activation_distance", "m; .inf for none"),
-        )
-        _text(self.dynamics, where, "dynamics", f"one of {DYNAMICS}")
-        _text(self.friction_model, where, "friction_model", f"one of {FORMULATIONS}")
-        if not isinstance(self.models, list | tuple):
-            raise ValueError(
-                f"{where}: models must be a list of model entries; got {self.models!r}"
-            )
-        models = []
-        for i, m in enumerate(self.models):
-            key = f"models[{i}]"
-            if not isinstance(m, ModelSpec):
-                raise ValueError(f"{where}: {key} must be a ModelSpec; got {m!r}")
-            _text(m.file, where, f"{key}.file", "a model file path")
-            _text(m.name, where, f"{key}.name", "a model instance name", optional=True)
-            _text(m.weld, where, f"{key}.weld", "a frame name", optional=True)
-            if not (
-                isinstance(m.actuate, list | tuple) and all(isinstance(j, str) for j in m.actuate)
-            ):
-                raise ValueError(
-                    f"{where}: {key}.actuate must be a list of joint names; got {m.actuate!r}"
-                )
-            _text(m.keyframe, where, f"{key}.keyframe", "a keyframe key's name", optional=True)
-            if not (
-                isinstance(m.ignore, list | tuple)
-                and all(isinstance(a, str) and a in IGNORABLE for a in m.ignore)
-            ):
-                raise ValueError(
-                    f"{where}: {key}.ignore must be a list of some of {list(IGNORABLE)} "
-                    f"(attributes to drop); got {m.ignore!r}"
-                )
-            models.append(replace(m, actuate=tuple(m.actuate), ignore=tuple(m.ignore)))
-        put("models", tuple(models))
-        if not isinstance(self.contacts, list | tuple):
-            raise ValueError(
-                f"{where}: contacts must be a list of contact entries; got {self.contacts!r}"
-            )
-        contacts = []
-        for i, c in enumerate(self.contacts):
-            key = f"contacts[{i}]"
-            if not isinstance(c, ContactSpec):
-                raise ValueError(f"{where}: {key} must be a ContactSpec; got {c!r}")
-            _text(c.body, where, f"{key}.body", "a body name")
-            _text(c.model, where, f"{key}.model", "a model instance name", optional=True)
-            _text(c.geometry, where, f"{key}.geometry", f"one of {GEOMETRY_SOURCES}", optional=True)
-            if not isinstance(c.points, list | tuple):
-                raise ValueError(
-                    f"{where}: {key}.points must be a list of [x, y, z] points "
-                    f"(m); got {c.points!r}"
-                )
-            points = tuple(
-                _numbers(p, where, f"{key}.points[{j}]", "3 finite coordinates [x, y, z] (m)", 3)
-                for j, p in enumerate(c.points)
-            )
-            radius = _number(c.radius, where, f"{key}.radius", "m")
-            friction = _number(
-                c.friction, where, f"{key}.friction", "Coulomb coefficient", optional=True
-            )
-            contacts.append(replace(c, points=points, radius=radius, friction=friction))
-        put("contacts", tuple(contacts))
-        if not isinstance(self.pairs, list | tuple):
-            raise ValueError(f"{where}: pairs must be a list of pair entries; got {self.pairs!r}")
-        pairs = []
-        for i, c in enumerate(self.pairs):
-            key = f"pairs[{i}]"
-            if not isinstance(c, PairSpec):
-                raise ValueError(f"{where}: {key} must be a PairSpec; got {c!r}")
-            for name in ("a", "b"):
-                _text(getattr(c, name), where, f"{key}.{name}", "a body name")
-            for name in ("model_a", "model_b"):
-                _text(getattr(c, name), where, f"{key}.{name}", "a model instance name",
-                      optional=True)  # fmt: skip
-            friction = _number(
-                c.friction, where, f"{key}.friction", "Coulomb coefficient", optional=True
-            )
-            pairs.append(replace(c, friction=friction))
-        put("pairs", tuple(pairs))
-        smoothing = _mapping(self.smoothing, where, "smoothing", "{kind: ..., parameters...}")
-        _text(
-            smoothing.get("kind", "exact"), where, "smoothing.kind", f"one of {sorted(_SMOOTHING)}"
-        )
-        for name, value in smoothing.items():
-            if name != "kind" and not callable(value):
-                _number(value, where, f"smoothing.{name}")
-        state = _mapping(self.initial_state, where, "initial_state", "{q: [...], v: [...]}")
-        for name, values in state.items():
-            if name in ("q", "v"):
-                state[name] = _numbers(values, where, f"initial_state.{name}", "numbers")
-        put("initial_state", state)
+        for part in ("q", "v"):
+            values = getattr(self.initial_state, part)
+            if values is not None and not np.all(np.isfinite(values)):
+                at = f"initial_state.{part}"
+                raise _Problem(at, f"{at} must be a list of finite numbers")
+        self._smoothing_policy()  # its parameters checked now, not at the first step
 
     def smoothing_policy(self) -> SmoothingPolicy:
         """The smoothing policy object this scene names, at this scene's time step: when the
         smoothing states a ``reference_time_step`` other than ``time_step``, the named policy
         wrapped in :class:`~drake_abs.contact.smoothing.TimeStepScaled` (mu times
         ``time_step / reference_time_step``)."""
-        where = f"scene {self.name!r}"
-        spec = dict(self.smoothing)
-        kind = spec.pop("kind", "exact")
-        reference = spec.pop("reference_time_step", None)
-        if kind not in _SMOOTHING:
-            raise ValueError(
-                f"{where}: smoothing.kind must be one of {sorted(_SMOOTHING)}; got {kind!r}"
-            )
         try:
-            policy = _SMOOTHING[kind](**spec)
-        except TypeError as err:
-            takes = [f.name for f in fields(_SMOOTHING[kind]) if f.name != "g"]
-            raise ValueError(
-                f"{where}: smoothing: bad smoothing parameters {spec} for kind {kind!r}, which "
-                f"takes {takes or 'none'} (and reference_time_step): {err}"
-            ) from err
+            return self._smoothing_policy()
+        except _Problem as problem:
+            raise ValueError(f"scene {self.name!r}: {problem.message}") from problem
+
+    def _smoothing_policy(self) -> SmoothingPolicy:
+        spec = self.smoothing
+        try:
+            policy = spec.policy()
         except ValueError as err:
-            raise ValueError(f"{where}: smoothing: {err}") from err
+            raise _Problem("smoothing", f"smoothing: {err}") from err
+        reference = spec.reference_time_step
         if reference is None:
             return policy
-        reference = _number(reference, where, "smoothing.reference_time_step", "s")
+        at = "smoothing.reference_time_step"
         if not (np.isfinite(reference) and reference > 0):
-            raise ValueError(
-                f"{where}: smoothing.reference_time_step must be a finite number > 0 (s); got "
-                f"{reference!r}"
-            )
-        if kind == "gaussian_matched":
-            raise ValueError(
-                f"{where}: smoothing.reference_time_step does not apply to gaussian_matched "
-                "(its impulse does not scale with mu; choose sigma for the time step)"
-            )
+            raise _Problem(at, f"{at} must be a finite number > 0 (s); got {reference!r}")
+        if isinstance(spec, GaussianMatchedSmoothing):
+            raise _Problem(at, f"{at} does not apply to gaussian_matched (its impulse does not "
+                           "scale with mu; choose sigma for the time step)")  # fmt: skip
         return TimeStepScaled.between(policy, self.time_step, reference)
 
     @property
@@ -561,22 +425,23 @@ class Scene:
         files) those of the ``geometry`` entries and of the pairs."""
         if not self.pairs and all(c.geometry is None for c in self.contacts):
             return sum(len(c.points) for c in self.contacts)
-        from drake_abs.multibody.builder import scene_contacts  # reads the model files
-
-        return len(scene_contacts(self))
+        where = f"scene {self.name!r}"
+        return len(contact_candidates(where, self.models, self.contacts, self.pairs))
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The scene as plain data, as a scene file writes it (mappings, lists, numbers, text,
+        null; the smoothing named by ``kind``): ``Scene.from_dict(scene.to_dict()) == scene``."""
+        hints = _hints(Scene)
+        return {f.name: _plain(getattr(self, f.name), hints[f.name], f.name, f.metadata,
+                               tags=False) for f in fields(Scene)}  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Scene:
-        """A scene from plain data (mappings, lists or tuples, numbers, text, as YAML gives):
-        checked against the schema (:class:`SceneFile`: keys, forms, required keys), then by the
-        Scene itself (values). ``ValueError`` naming the key and the expected form."""
+        """A scene from plain data (mappings, lists or tuples, numbers, text, as YAML gives),
+        read as a scene file is (see the module docstring); ``ValueError`` naming the scene, the
+        key and the expected form."""
         name = data.get("name") if isinstance(data, Mapping) else None
-        checker = _Checker(f"scene {name!r}" if isinstance(name, str) else "scene")
-        checker.check_scene(data)
-        return _scene_of(data)
+        return _load(data, f"scene {name!r}" if isinstance(name, str) else "scene")
 
     @classmethod
     def load(cls, name: str | Path) -> Scene:
@@ -586,8 +451,6 @@ class Scene:
         (absolute, or relative to the working directory)."""
         text = str(name)
         if text.startswith("package://"):
-            from drake_abs.multibody.builder import resolve_package_file
-
             return cls._from_file(resolve_package_file(text, what="scene file"), text)
         path = Path(name)
         if path.suffix in (".yaml", ".yml"):
@@ -629,243 +492,309 @@ class Scene:
         return _load_yaml(path.read_text(), label)
 
     def to_yaml(self) -> str:
-        return yaml.safe_dump(_plain(self.to_dict()), sort_keys=False)
-
-
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {k: _plain(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_plain(v) for v in obj]
-    return obj
+        """The scene as a scene file (YAML text): ``Scene.from_yaml(scene.to_yaml()) == scene``."""
+        return yaml.safe_dump(self.to_dict(), sort_keys=False)
 
 
 # ---------------------------------------------------------------------------------------------
-# the scene-file schema: mutable dataclasses read by Drake's yaml_load_typed, then converted to
-# the frozen Scene (which checks the values). Each field's metadata gives its expected form
-# ("form"), whether it is required, a fixed length ("size"), its allowed values ("choices"), and
-# for a list of entries the form of one entry ("item").
+# reading: plain data checked against the annotations (with errors naming the key), read by
+# Drake's yaml_load_typed into mutable twins of the dataclasses, held by the frozen ones
 
 
-def _key(form: str, default=MISSING, *, factory=MISSING, required=False, size=None,
-         choices=None, item=None):  # fmt: skip
-    meta = {"form": form, "required": required, "size": size, "choices": choices, "item": item}
-    return field(default=default, default_factory=factory, metadata=meta)
+class _Problem(Exception):
+    """A value the scene refuses: ``key`` (``"contacts[0].points[1]"``; ``""``: the scene
+    itself) and the message, which names it; a file's loader adds the file and the key's line."""
+
+    def __init__(self, key: str, message: str):
+        super().__init__(message)
+        self.key = key
+        self.message = message
 
 
-def _schema(cls):
-    """A dataclass whose fields' ``type`` is the annotation itself, not its text (this module
-    postpones annotations; Drake's ``yaml_load_typed`` reads ``field.type``)."""
-    cls = dataclass(cls)
-    hints = typing.get_type_hints(cls)
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    """The annotations of a dataclass's fields, evaluated (this module postpones them)."""
+    return typing.get_type_hints(cls)
+
+
+def _optional_of(hint: Any) -> Any:
+    """``X`` for ``X | None``, else None."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is type(None):
+            return args[0]
+    return None
+
+
+def _is_union(hint: Any) -> bool:
+    return typing.get_origin(hint) in (typing.Union, types.UnionType)
+
+
+def _default(f: dataclasses.Field) -> Any:
+    return f.default if f.default_factory is dataclasses.MISSING else f.default_factory()
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _is_integer(value) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _is_sequence(value) -> bool:
+    return isinstance(value, list | tuple) or (isinstance(value, np.ndarray) and value.ndim == 1)
+
+
+_SCALARS = {
+    str: (lambda v: isinstance(v, str), str),
+    float: (_is_number, float),
+    int: (_is_integer, int),
+}
+
+
+def _plain(value: Any, hint: Any, key: str, meta: Mapping[str, Any], *, tags: bool = True):
+    """``value`` (plain data as YAML gives it, or the typed value) checked against the
+    annotation ``hint``, as plain data: lists, floats, integers, text, null and mappings, a
+    member of a union by kind as a mapping tagged with its class (``tags``, for Drake's reader)
+    or with its ``kind``. ``_Problem`` naming ``key`` and the expected form (``meta["form"]``)
+    otherwise."""
+    form = meta["form"]
+    inner = _optional_of(hint)
+    if inner is not None:
+        if value is None:
+            return None
+        hint = inner
+    if _is_union(hint):
+        return _plain_kind(value, typing.get_args(hint), key, form, tags)
+    if dataclasses.is_dataclass(hint):
+        return _plain_entry(value, hint, key, form, tags)
+    if typing.get_origin(hint) is tuple:
+        args = typing.get_args(hint)
+        item, size = args[0], (None if args[-1] is Ellipsis else len(args))
+        choices = meta.get("choices")
+        if (
+            not _is_sequence(value)
+            or (size is not None and len(value) != size)
+            or (item is float and not all(_is_number(x) for x in value))
+            or (choices is not None and not all(isinstance(x, str) and x in choices for x in value))
+        ):
+            raise _Problem(key, f"{key} must be {form}; got {_describe(value)}")
+        each = {"form": meta["item"], "choices": None, "item": None}
+        return [_plain(x, item, f"{key}[{j}]", each, tags=tags) for j, x in enumerate(value)]
+    ok, make = _SCALARS[hint]
+    choices = meta.get("choices")
+    if not ok(value) or (choices is not None and value not in choices):
+        raise _Problem(key, f"{key} must be {form}; got {_describe(value)}")
+    return make(value)
+
+
+def _given(value: Any, names: list[str], key: str, form: str) -> dict[str, Any]:
+    """The mapping ``value`` of keys among ``names``; ``_Problem`` for another value or an
+    unknown key (naming the closest known one)."""
+    what = key or "a scene"
+    if not isinstance(value, Mapping):
+        raise _Problem(key, f"{what} must be {form}; got {_describe(value)}")
+    for name in value:
+        if name not in names:
+            child = f"{key}.{name}" if key else str(name)
+            close = difflib.get_close_matches(str(name), names, n=1)
+            hint = f" (did you mean {(f'{key}.' if key else '') + close[0]!r}?)" if close else ""
+            raise _Problem(
+                child, f"unknown key {child!r}{hint}; {what} takes the keys {', '.join(names)}"
+            )
+    return dict(value)
+
+
+def _check_required(given: Mapping[str, Any], cls: type, key: str) -> None:
+    """``_Problem`` for a required key of the dataclass ``cls`` that ``given`` lacks."""
     for f in fields(cls):
-        f.type = hints[f.name]
-    return cls
+        if is_required(f) and f.name not in given:
+            child = f"{key}.{f.name}" if key else f.name
+            what = key or "a scene"
+            raise _Problem(key, f"{child} is missing: {what} needs it, as {f.metadata['form']}")
 
 
-_DEFAULT = {f.name: f for f in fields(Scene)}
+def _plain_entry(value: Any, cls: type, key: str, form: str, tags: bool) -> dict[str, Any]:
+    """A dataclass's value (an instance, or a mapping of its keys) as a plain mapping of every
+    key (those left out at their defaults)."""
+    if isinstance(value, cls):
+        given = {f.name: getattr(value, f.name) for f in fields(cls)}
+    else:
+        given = _given(value, [f.name for f in fields(cls)], key, form)
+    _check_required(given, cls, key)
+    hints, out = _hints(cls), {}
+    for f in fields(cls):
+        child = f"{key}.{f.name}" if key else f.name
+        item = given[f.name] if f.name in given else _default(f)
+        out[f.name] = _plain(item, hints[f.name], child, f.metadata, tags=tags)
+    return out
 
 
-def _scene_default(name: str):
-    """The Scene's default for ``name`` (so that a key left out of a file means the same)."""
-    f = _DEFAULT[name]
-    return f.default if f.default_factory is MISSING else f.default_factory()
+def _plain_kind(value: Any, members: tuple[type, ...], key: str, form: str, tags: bool):
+    """A member of a union by kind (an instance, or a mapping ``{kind: ..., <its keys>}``) as a
+    plain mapping: tagged ``!<class>`` (``tags``) or with its ``kind``; the parameters of
+    another kind are refused naming the kind's own."""
+    names = {m: [f.name for f in fields(m)] for m in members}
+    common = [n for n in names[members[0]] if all(n in names[m] for m in members)]
+    own = {m: [n for n in names[m] if n not in common] for m in members}
+    if isinstance(value, members):
+        member, given = type(value), {f.name: getattr(value, f.name) for f in fields(value)}
+    else:
+        known = ["kind", *dict.fromkeys(n for m in members for n in own[m]), *common]
+        given = _given(value, known, key, form)
+        kinds = {m.kind: m for m in members}
+        kind = given.pop("kind", members[0].kind)
+        if not isinstance(kind, str) or kind not in kinds:
+            raise _Problem(f"{key}.kind", f"{key}.kind must be one of {sorted(kinds)}; got "
+                           f"{_describe(kind)}")  # fmt: skip
+        member = kinds[kind]
+        if any(name not in names[member] for name in given):
+            parameters = {k: v for k, v in given.items() if k not in common}
+            raise _Problem(
+                key,
+                f"{key}: bad {key} parameters {parameters} for kind {kind!r}, which takes "
+                f"{own[member] or 'none'} (and {', '.join(common)})",
+            )
+    plain = _plain_entry(given, member, key, form, tags)
+    head = {"_tag": f"!{_reading_schema(member).__name__}"} if tags else {"kind": member.kind}
+    return head | {n: plain[n] for n in own[member] + common}
 
 
-_OPTIONAL_TEXT = "text, or null"
-_FRICTION = "a number >= 0: the Coulomb friction coefficient, or null for frictionless contact"
-_POINT = {"form": "a point [x, y, z]: 3 numbers (m, in the body's frame)", "size": 3}
-
-
-@_schema
-class ModelEntry:
-    """One entry of a scene file's ``models`` (see :class:`ModelSpec`)."""
-
-    file: str = _key(
-        "a model file: package://<package>/<path> (packages: drake_abs, example-robot-data, "
-        "<robot>_description, gymnasium) or a path on disk",
-        "",
-        required=True,
-    )
-    name: str | None = _key(f"the model instance's name: {_OPTIONAL_TEXT}", None)
-    weld: str | None = _key(
-        f"the name of a frame of the model, welded to the world: {_OPTIONAL_TEXT}", None
-    )
-    actuate: list[str] = _key(
-        "a list of joint names (text), each given an actuator",
-        factory=list,
-        item={"form": "a joint name (text)"},
-    )
-    keyframe: str | None = _key(
-        f"the name of a <key> of the MuJoCo file's <keyframe>: {_OPTIONAL_TEXT}", None
-    )
-    ignore: list[str] = _key(
-        f"a list of the MuJoCo file's attributes to drop, some of {list(IGNORABLE)}",
-        factory=list,
-        item={"form": f"one of {list(IGNORABLE)}", "choices": tuple(IGNORABLE)},
-    )
-
-
-@_schema
-class ContactEntry:
-    """One entry of a scene file's ``contacts`` (see :class:`ContactSpec`)."""
-
-    body: str = _key("a body's name (text)", "", required=True)
-    points: list[list[float]] = _key(
-        "a list of points [x, y, z] (m, in the body's frame)", factory=list, item=_POINT
-    )
-    radius: float = _key("a number >= 0: the sphere radius at each point (m)", 0.0)
-    friction: float | None = _key(_FRICTION, None)
-    model: str | None = _key(f"the body's model instance: {_OPTIONAL_TEXT}", None)
-    geometry: str | None = _key(
-        f"one of {list(GEOMETRY_SOURCES)} (the body's collision shapes), or null",
-        None,
-        choices=GEOMETRY_SOURCES,
-    )
-
-
-@_schema
-class PairEntry:
-    """One entry of a scene file's ``pairs`` (see :class:`PairSpec`)."""
-
-    a: str = _key("a body's name (text)", "", required=True)
-    b: str = _key("a body's name (text)", "", required=True)
-    friction: float | None = _key(_FRICTION, None)
-    model_a: str | None = _key(f"body a's model instance: {_OPTIONAL_TEXT}", None)
-    model_b: str | None = _key(f"body b's model instance: {_OPTIONAL_TEXT}", None)
-
-
-@_schema
-class SmoothingEntry:
-    """A scene file's ``smoothing``: the policy's kind and its parameters (those a kind does
-    not take are refused when the policy is made: :meth:`Scene.smoothing_policy`)."""
-
-    kind: str = _key(
-        f"one of {sorted(_SMOOTHING)}", _scene_default("smoothing")["kind"],
-        choices=tuple(sorted(_SMOOTHING)),
-    )  # fmt: skip
-    value: float | None = _key("a number >= 0: mu of kind fixed (m N s)", None)
-    mu_max: float | None = _key("a number > 0: contact_aware's mu at contact (m N s)", None)
-    mu_min: float | None = _key("a number >= 0: contact_aware's mu far away (m N s)", None)
-    length: float | None = _key("a number > 0: contact_aware's decay length (m)", None)
-    sigma: float | None = _key("a number > 0: gaussian_matched's noise scale (m)", None)
-    c1: float | None = _key("a number: gaussian_matched's c1", None)
-    c2: float | None = _key("a number: gaussian_matched's c2", None)
-    reference_time_step: float | None = _key(
-        "a number > 0: the time step mu is stated at (s)", None
+@functools.cache
+def _reading_schema(hint: Any) -> Any:
+    """The type Drake's ``yaml_load_typed`` reads for the annotation ``hint``: a dataclass's
+    mutable twin (``<name>File``, every field with a default: Drake's reader makes an empty one
+    and sets its fields; a union's member is selected by the tag ``!<name>File``), lists for
+    tuples, and the same unions of the twins."""
+    inner = _optional_of(hint)
+    if inner is not None:
+        return typing.Optional[_reading_schema(inner)]  # noqa: UP045 (a typing object to hold)
+    if _is_union(hint):
+        return typing.Union[tuple(_reading_schema(m) for m in typing.get_args(hint))]  # noqa: UP007
+    if typing.get_origin(hint) is tuple:
+        return list[_reading_schema(typing.get_args(hint)[0])]
+    if not dataclasses.is_dataclass(hint):
+        return hint
+    twin = []
+    for f in fields(hint):
+        read = _reading_schema(_hints(hint)[f.name])
+        empty = (dataclasses.field(default_factory=read) if dataclasses.is_dataclass(read)
+                 else dataclasses.field(default=None))  # fmt: skip
+        twin.append((f.name, read, empty))
+    doc = f"What Drake's reader fills in for a :class:`{hint.__name__}`."
+    return dataclasses.make_dataclass(
+        f"{hint.__name__}File", twin, namespace={"__doc__": doc}, module=__name__
     )
 
 
-@_schema
-class InitialStateEntry:
-    """A scene file's ``initial_state``."""
-
-    q: list[float] | None = _key("a list of numbers: the positions (m, rad)", None)
-    v: list[float] | None = _key("a list of numbers: the velocities (m/s, rad/s)", None)
-
-
-@_schema
-class SceneFile:
-    """The schema of a scene file (the YAML format of the module docstring), read by Drake's
-    ``yaml_load_typed``; :class:`Scene` is made from it. Keys left out take the Scene's
-    defaults."""
-
-    name: str = _key("the scene's name (text)", "", required=True)
-    models: list[ModelEntry] = _key(
-        "a list of model entries, each {file: package://<package>/<path>, ...}",
-        factory=list,
-        required=True,
-        item={"form": "a model entry: a mapping {file: ..., name: ..., weld: ..., ...}"},
-    )
-    contacts: list[ContactEntry] = _key(
-        "a list of contact entries, each {body: ..., points: [[x, y, z], ...], ...}",
-        factory=list,
-        item={
-            "form": "a contact entry: a mapping {body: ..., points: [[x, y, z], ...], radius: "
-            "..., friction: ...} or {body: ..., geometry: collision, friction: ...}"
-        },
-    )
-    pairs: list[PairEntry] = _key(
-        "a list of pair entries, each {a: <body>, b: <body>, friction: ...}",
-        factory=list,
-        item={"form": "a pair entry: a mapping {a: <body>, b: <body>, friction: ...}"},
-    )
-    time_step: float = _key("a number > 0: the time step (s)", _scene_default("time_step"))
-    friction_directions: int = _key(
-        "an integer >= 2: tangent directions per frictional contact",
-        _scene_default("friction_directions"),
-    )
-    ground_normal: list[float] = _key(
-        "[nx, ny, nz]: 3 numbers, not all zero",
-        factory=lambda: list(_scene_default("ground_normal")),
-        size=3,
-    )
-    ground_height: float = _key(
-        "a number: the ground's height (m)", _scene_default("ground_height")
-    )
-    activation_distance: float = _key(
-        "a number > 0 (m), or .inf for none", _scene_default("activation_distance")
-    )
-    smoothing: SmoothingEntry = _key(
-        f"a mapping {{kind: one of {sorted(_SMOOTHING)}, <the kind's parameters>}}",
-        factory=SmoothingEntry,
-    )
-    initial_state: InitialStateEntry = _key(
-        "a mapping {q: [...], v: [...]}", factory=InitialStateEntry
-    )
-    dynamics: str = _key(f"one of {list(DYNAMICS)}", _scene_default("dynamics"), choices=DYNAMICS)
-    friction_model: str = _key(
-        f"one of {list(FORMULATIONS)}", _scene_default("friction_model"), choices=FORMULATIONS
-    )
+def _frozen(value: Any, hint: Any) -> Any:
+    """What Drake's reader made (``value``, of :func:`_reading_schema` ``(hint)``) as the
+    annotation ``hint`` has it: frozen dataclasses, tuples."""
+    inner = _optional_of(hint)
+    if inner is not None:
+        return None if value is None else _frozen(value, inner)
+    if _is_union(hint):
+        (member,) = [m for m in typing.get_args(hint) if _reading_schema(m) is type(value)]
+        return _frozen(value, member)
+    if dataclasses.is_dataclass(hint):
+        hints = _hints(hint)
+        return hint(**{f.name: _frozen(getattr(value, f.name), hints[f.name])
+                       for f in fields(hint)})  # fmt: skip
+    if typing.get_origin(hint) is tuple:
+        return tuple(_frozen(x, typing.get_args(hint)[0]) for x in value)
+    return value
 
 
-def _scene_of(data: Mapping[str, Any]) -> Scene:
-    """The Scene of plain data that passed the schema checks (the nulls of ``smoothing`` and
-    ``initial_state``, keys the file left out, dropped)."""
-    rest = dict(data)
-    models = tuple(ModelSpec(**m) for m in rest.pop("models"))
-    contacts = tuple(ContactSpec(**c) for c in rest.pop("contacts", ()))
-    pairs = tuple(PairSpec(**c) for c in rest.pop("pairs", ()))
-    for key in ("smoothing", "initial_state"):
-        if key in rest:
-            rest[key] = {k: v for k, v in rest[key].items() if v is not None}
-    return Scene(models=models, contacts=contacts, pairs=pairs, **rest)
+#: The schema Drake's ``yaml_load_typed`` reads a scene into: the mutable twin of :class:`Scene`
+#: (made from its fields; lists for tuples, every field with a default), which the frozen Scene
+#: is then made from.
+_SceneFile = _reading_schema(Scene)
+
+
+def _describe(value) -> str:
+    """A value as the message shows it: what YAML made of it."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"{str(value).lower()} (a boolean)"
+    if isinstance(value, str):
+        return f"{value!r} (text)"
+    if isinstance(value, Mapping):
+        return f"a mapping {_shorten(dict(value))}"
+    if _is_sequence(value):
+        return f"a list of {len(value)}: {_shorten(list(value))}"
+    return repr(value)
+
+
+def _shorten(value, limit: int = 80) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# ---------------------------------------------------------------------------------------------
+# loading: plain data (from YAML, with the line of each key) made a Scene
+
+
+def _load(data: Any, label: str, lines: Mapping[str, int] | None = None) -> Scene:
+    """The Scene of plain ``data``: its keys checked, made (every value checked and read, see
+    the module docstring), its model files' packages checked. ``ValueError`` starting with
+    ``label`` and the key's line in ``lines``."""
+    try:
+        names = [f.name for f in fields(Scene)]
+        given = _given(data, names, "", "a mapping {name: ..., models: [...], ...}")
+        _check_required(given, Scene, "")
+        try:
+            scene = Scene(**given)
+        except ValueError as err:
+            if isinstance(err.__cause__, _Problem):
+                raise err.__cause__ from None
+            raise
+        for i, model in enumerate(scene.models):
+            problem = model_file_problem(model.file)
+            if problem is not None:
+                raise _Problem(f"models[{i}].file", f"models[{i}].file: {problem}")
+        return scene
+    except _Problem as problem:
+        raise ValueError(f"{_at(label, lines or {}, problem.key)}: {problem.message}") from None
+
+
+def _at(label: str, lines: Mapping[str, int], key: str) -> str:
+    """``label`` with the line of ``key`` (or of the nearest enclosing key known)."""
+    while key:
+        if key in lines:
+            return f"{label}, line {lines[key]}"
+        key = re.sub(r"(\.[^.\[]+|\[\d+\])$", "", key) if re.search(r"[.\[]", key) else ""
+    return label
 
 
 def _load_yaml(text: str, label: str) -> Scene:
-    """A Scene from YAML ``text``: parsed (syntax errors name the line), checked against
-    :class:`SceneFile` (naming line, key and form), read by ``yaml_load_typed``, made a Scene
-    (its value errors prefixed with ``label`` and the key's line)."""
+    """A Scene from YAML ``text`` (syntax errors name the line, other errors the key's line)."""
     data, lines = _read_yaml(text, label)
-    if isinstance(data, Mapping):  # yaml_load_typed ignores root keys starting with "_"
+    if isinstance(data, Mapping):  # root keys starting with "_" are ignored (YAML anchors)
         data = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("_"))}
-    checker = _Checker(label, lines)
-    checker.check_scene(data)
-    try:
-        loaded = yaml_load_typed(
-            schema=SceneFile,
-            data=text,
-            allow_yaml_with_no_schema=False,
-            allow_schema_with_no_yaml=True,
-            retain_map_defaults=False,
-        )
-    except Exception as err:  # not expected: the checks above pass only what it reads
-        raise ValueError(f"{label}: {type(err).__name__}: {err}") from err
-    try:
-        return _scene_of(asdict(loaded))
-    except ValueError as err:
-        message = str(err).removeprefix(f"scene {data['name']!r}: ")
-        key = re.match(r"[A-Za-z_]\w*(\[\d+\])*(\.[A-Za-z_]\w*(\[\d+\])*)*", message)
-        raise ValueError(f"{checker.at(key.group(0) if key else '')}: {message}") from None
+    return _load(data, label, lines)
 
+
+class _SceneLoader(yaml.SafeLoader):
+    """YAML's safe loader, except that exponent-only numbers such as ``1e-3`` are numbers (as in
+    YAML 1.2; PyYAML follows YAML 1.1 and reads them as strings, which the type checks would
+    reject)."""
+
+
+_SceneLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
 
 _COLLECTION_TAGS = ("tag:yaml.org,2002:map", "tag:yaml.org,2002:seq")
 
 
 def _read_yaml(text: str, label: str) -> tuple[Any, dict[str, int]]:
     """The plain data of YAML ``text`` and the line of each key (``"contacts[0].points"``);
-    ``ValueError`` naming ``label`` and the line for a syntax error, a duplicate key or a key
-    that is not text."""
+    ``ValueError`` naming ``label`` and the line for a syntax error, a duplicate key, a tag or a
+    key that is not text."""
     loader = _SceneLoader(text)
     lines: dict[str, int] = {}
 
@@ -909,122 +838,3 @@ def _read_yaml(text: str, label: str) -> tuple[Any, dict[str, int]]:
         raise ValueError(f"{label}: not valid YAML: {err}") from None
     finally:
         loader.dispose()
-
-
-def _optional_of(hint):
-    """``X`` for ``Optional[X]``, else None."""
-    if typing.get_origin(hint) in (typing.Union, types.UnionType):
-        args = typing.get_args(hint)
-        if len(args) == 2 and args[1] is type(None):
-            return args[0]
-    return None
-
-
-def _is_integer(value) -> bool:
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _is_sequence(value) -> bool:
-    return isinstance(value, list | tuple) or (isinstance(value, np.ndarray) and value.ndim == 1)
-
-
-def _describe(value) -> str:
-    """A value as the message shows it: what YAML made of it."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return f"{str(value).lower()} (a boolean)"
-    if isinstance(value, str):
-        return f"{value!r} (text)"
-    if isinstance(value, Mapping):
-        return f"a mapping {_shorten(dict(value))}"
-    if _is_sequence(value):
-        return f"a list of {len(value)}: {_shorten(list(value))}"
-    return repr(value)
-
-
-def _shorten(value, limit: int = 80) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-class _Checker:
-    """Checks plain scene data against :class:`SceneFile`: each error a ``ValueError`` that
-    names ``label`` (the file, or the scene), the key's line when ``lines`` has it, the key and
-    the expected form."""
-
-    def __init__(self, label: str, lines: Mapping[str, int] | None = None):
-        self.label = label
-        self.lines = lines or {}
-
-    def at(self, key: str) -> str:
-        """The label with the line of ``key`` (or of the nearest enclosing key known)."""
-        while key:
-            if key in self.lines:
-                return f"{self.label}, line {self.lines[key]}"
-            key = re.sub(r"(\.[^.\[]+|\[\d+\])$", "", key) if re.search(r"[.\[]", key) else ""
-        return self.label
-
-    def fail(self, key: str, message: str):
-        raise ValueError(f"{self.at(key)}: {message}")
-
-    def check_scene(self, data) -> None:
-        self.mapping(data, SceneFile, "", "a mapping {name: ..., models: [...], ...}")
-        from drake_abs.multibody.builder import model_file_problem  # it imports this module
-
-        for i, model in enumerate(data["models"]):
-            problem = model_file_problem(model["file"])
-            if problem is not None:
-                self.fail(f"models[{i}].file", f"models[{i}].file: {problem}")
-
-    def mapping(self, value, schema, key: str, form: str) -> None:
-        what = key or "a scene"
-        if not isinstance(value, Mapping):
-            self.fail(key, f"{what} must be {form}; got {_describe(value)}")
-        known = {f.name: f for f in fields(schema)}
-        for name in value:
-            if name not in known:
-                child = f"{key}.{name}" if key else str(name)
-                close = difflib.get_close_matches(str(name), list(known), n=1)
-                hint = ""
-                if close:
-                    hint = f" (did you mean {(f'{key}.' if key else '') + close[0]!r}?)"
-                self.fail(
-                    child,
-                    f"unknown key {child!r}{hint}; {what} takes the keys {', '.join(known)}",
-                )
-        for f in known.values():
-            child = f"{key}.{f.name}" if key else f.name
-            if f.metadata["required"] and f.name not in value:
-                self.fail(key, f"{child} is missing: {what} needs it, as {f.metadata['form']}")
-        for name, item in value.items():
-            child = f"{key}.{name}" if key else name
-            self.value(item, known[name].type, child, known[name].metadata)
-
-    def value(self, value, hint, key: str, meta: Mapping) -> None:
-        form = meta["form"]
-        inner = _optional_of(hint)
-        if inner is not None:
-            if value is None:
-                return
-            hint = inner
-        if is_dataclass(hint):
-            self.mapping(value, hint, key, form)
-            return
-        if typing.get_origin(hint) is list:
-            (item,) = typing.get_args(hint)
-            size = meta.get("size")
-            if (
-                not _is_sequence(value)
-                or (size is not None and len(value) != size)
-                or (item is float and not all(_is_number(x) for x in value))
-            ):
-                self.fail(key, f"{key} must be {form}; got {_describe(value)}")
-            if item is not float:
-                for j, entry in enumerate(value):
-                    self.value(entry, item, f"{key}[{j}]", meta["item"])
-            return
-        ok = {str: lambda v: isinstance(v, str), float: _is_number, int: _is_integer}[hint]
-        choices = meta.get("choices")
-        if not ok(value) or (choices is not None and value not in choices):
-            self.fail(key, f"{key} must be {form}; got {_describe(value)}")

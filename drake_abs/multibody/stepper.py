@@ -130,6 +130,9 @@ class ComplementarityStepper:
         #: makes it picklable: it is sent as the scene description and its settings, and
         #: rebuilt where it is unpickled (a Ray worker: :mod:`drake_abs.parallel`).
         self.scene = None
+        #: The function that rebuilds it there, ``rebuild(scene, settings)`` (set with
+        #: :attr:`scene`: :func:`drake_abs.multibody.builder.rebuild_stepper`).
+        self.rebuild = None
         #: the model parameters :meth:`with_parameters` changed from the scene's, ``{name:
         #: value}`` (pickled with the settings)
         self._parameters: dict[str, float] = {}
@@ -145,14 +148,12 @@ class ComplementarityStepper:
     def __reduce__(self):
         """Pickled as its scene and settings (see :attr:`scene`); a stepper built from a contact
         model directly has no description to send."""
-        if self.scene is None:
+        if self.scene is None or self.rebuild is None:
             raise TypeError(
                 "this ComplementarityStepper was built from a contact model, not from a scene, "
                 "so it cannot be pickled (e.g. sent to Ray workers): build it with "
                 "make_stepper(scene, ...) or SceneModel.stepper(...)"
             )
-        from drake_abs.multibody.builder import rebuild_stepper
-
         settings = dict(
             smoothing=self.smoothing, gradient=self.gradient,
             activation_distance=self.activation_distance, friction=self.friction,
@@ -160,7 +161,7 @@ class ComplementarityStepper:
         )  # fmt: skip
         if self._parameters:  # a stepper of with_parameters: the scene's, then its changes
             settings["parameters"] = dict(self._parameters)
-        return rebuild_stepper, (self.scene, settings)
+        return self.rebuild, (self.scene, settings)
 
     @property
     def sizes(self) -> tuple[int, int, int, int]:

@@ -19,8 +19,8 @@ from drake_abs.diagrams.scene_visualization import (
 )
 from drake_abs.experiments.scene_recordings import RECORDINGS
 from drake_abs.experiments.scene_recordings import rollout as recording_rollout
-from drake_abs.multibody.builder import PACKAGE_DIR
 from drake_abs.multibody.model_files import read_stl, stl_to_obj, visual_only_model_text
+from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.scene import Scene
 
 SCENES = sorted((PACKAGE_DIR / "scenes").glob("*.yaml"))

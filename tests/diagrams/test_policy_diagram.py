@@ -12,7 +12,8 @@ from drake_abs.contact.lcs import LcsStepper
 from drake_abs.diagrams.policy_diagram import build_policy_diagram, rollout_return
 from drake_abs.engine import rollout
 from drake_abs.multibody import ComplementarityStepper
-from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.scene import Scene
 from drake_abs.policy.policies import LinearPolicy, MLPPolicy
 from drake_abs.policy.rewards import QuadraticReward

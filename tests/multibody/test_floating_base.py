@@ -276,9 +276,9 @@ def test_two_free_balls_each_keep_a_unit_quaternion():
 
 def test_a_scene_quaternion_must_be_unit():
     scene = Scene.load("ball_throw")
-    bad = replace(scene, initial_state={**scene.initial_state, "q": [2, 0, 0, 0, 0, 0, 0.5]})
+    bad = replace(scene, initial_state=replace(scene.initial_state, q=[2, 0, 0, 0, 0, 0, 0.5]))
     with pytest.raises(ValueError, match="unit quaternion"):
         build_scene_model(bad)
-    near = replace(scene, initial_state={**scene.initial_state, "q": [0.7071, 0.7071, 0, 0, 0,
-                                                                    0, 0.5]})  # fmt: skip
+    near_q = [0.7071, 0.7071, 0, 0, 0, 0, 0.5]
+    near = replace(scene, initial_state=replace(scene.initial_state, q=near_q))
     assert np.linalg.norm(build_scene_model(near).q0[:4]) == pytest.approx(1.0, abs=1e-15)

@@ -13,9 +13,10 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_abs import Exact
-from drake_abs.multibody.builder import build_scene_model, gymnasium_assets_dir
+from drake_abs.multibody.builder import build_scene_model
 from drake_abs.multibody.drake_dynamics import MultibodyContactModel
 from drake_abs.multibody.model_files import format_model_report, read_mjcf
+from drake_abs.multibody.packages import gymnasium_assets_dir
 from drake_abs.multibody.scene import ContactSpec, ModelSpec, Scene
 
 # a 0.2 m cube of 1 kg, its corners the contacts
@@ -298,7 +299,7 @@ def test_keyframe_and_ignore_are_for_mjcf_files_only(tmp_path):
 def test_ur5_from_example_robot_data_keeps_its_world_joint_transmissions_and_limits():
     """The URDF as published: welded to the world by its own joint, one actuator per
     <transmission>, effort and position limits from its <limit> tags."""
-    from drake_abs.multibody.builder import example_robot_data_dir
+    from drake_abs.multibody.packages import example_robot_data_dir
 
     path = example_robot_data_dir() / "robots/ur_description/urdf/ur5_robot.urdf"
     root = ElementTree.parse(path).getroot()

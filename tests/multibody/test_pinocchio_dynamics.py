@@ -13,12 +13,13 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BallRpyJoint, SpatialInertia, UnitInertia
 
-from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.builder import build_scene_model
 from drake_abs.multibody.drake_dynamics import (
     GroundPlane,
     MultibodyContactModel,
     PointContact,
 )
+from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 from drake_abs.multibody.scene import ModelSpec, Scene
 

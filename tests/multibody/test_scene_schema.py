@@ -1,5 +1,5 @@
 """Scene files read against a typed schema (Drake's ``yaml_load_typed`` with the dataclasses of
-:class:`drake_abs.multibody.scene.SceneFile`): every error from a bad file is a ``ValueError``
+:class:`drake_abs.multibody.scene.Scene`): every error from a bad file is a ``ValueError``
 naming the file, the line, the key and the expected form; package data is addressed by name
 (``Scene.load("box_push")``, ``package://drake_abs/models/...``) from any working directory."""
 
@@ -8,24 +8,20 @@ import importlib.util
 import textwrap
 
 import pytest
+from pydrake.common.yaml import yaml_load_data
 
 import drake_abs.multibody.scene as scene_module
 from drake_abs.contact.smoothing import ContactAware, Fixed
-from drake_abs.multibody.builder import (
-    PACKAGE_DIR,
-    build_scene_model,
-    package_folders,
-    resolve_model_file,
-)
+from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.packages import PACKAGE_DIR, package_folders
+from drake_abs.multibody.parsing import resolve_model_file
 from drake_abs.multibody.scene import (
-    ContactEntry,
+    SMOOTHING_KINDS,
     ContactSpec,
-    ModelEntry,
+    InitialState,
     ModelSpec,
-    PairEntry,
     PairSpec,
     Scene,
-    SceneFile,
     shipped_scenes,
 )
 
@@ -82,8 +78,15 @@ def test_the_file_is_read_by_drakes_yaml_load_typed_with_the_schema(monkeypatch)
     monkeypatch.setattr(scene_module, "yaml_load_typed", spy)
     Scene.from_yaml(GOOD)
     assert len(calls) == 1
-    assert calls[0]["schema"] is SceneFile and calls[0]["data"] == GOOD
+    assert calls[0]["schema"] is scene_module._SceneFile
     assert calls[0]["allow_yaml_with_no_schema"] is False
+    # the file's data, every key given, the smoothing's kind as the tag of the union's member
+    read = yaml_load_data(calls[0]["data"])
+    assert read["smoothing"] == {"_tag": "!FixedSmoothingFile", "value": 1e-4,
+                                 "reference_time_step": None}  # fmt: skip
+    assert read["contacts"][0]["points"] == [[-0.2, 0.0, -0.1], [0.2, 0.0, -0.1]]
+    assert read["initial_state"] == {"q": [0.0, 0.1, 0.0], "v": [1.0, 0.0, 0.0]}
+    assert set(read) == {f.name for f in dataclasses.fields(Scene)}
 
 
 def test_keys_left_out_take_the_scene_defaults():
@@ -93,26 +96,21 @@ def test_keys_left_out_take_the_scene_defaults():
     )
 
 
-def test_the_schema_has_the_keys_of_the_scene_and_its_entries():
-    names = [f.name for f in dataclasses.fields(SceneFile)]
+def test_the_schema_is_the_scene_and_each_key_is_documented_once():
+    # Drake's reader fills in a twin made from the Scene's own fields
+    names = [f.name for f in dataclasses.fields(scene_module._SceneFile)]
     assert names == [f.name for f in dataclasses.fields(Scene)]
-    for entry, spec in (
-        (ModelEntry, ModelSpec),
-        (ContactEntry, ContactSpec),
-        (PairEntry, PairSpec),
-    ):
-        assert [f.name for f in dataclasses.fields(entry)] == [
-            f.name for f in dataclasses.fields(spec)
-        ]
-    # every number a smoothing policy takes is a key of smoothing
-    smoothing = {f.name for f in dataclasses.fields(scene_module.SmoothingEntry)}
-    for policy in scene_module._SMOOTHING.values():
-        assert {f.name for f in dataclasses.fields(policy) if f.name != "g"} <= smoothing
-    # and the module docstring (the format's documentation) describes every key
-    doc = scene_module.__doc__
-    for schema in (SceneFile, ModelEntry, ContactEntry, PairEntry, scene_module.SmoothingEntry):
+    # each kind of smoothing takes its policy's parameters, and the reference time step
+    assert sorted(SMOOTHING_KINDS) == ["contact_aware", "exact", "fixed", "gaussian_matched"]
+    for member in SMOOTHING_KINDS.values():
+        own = {f.name for f in dataclasses.fields(member)} - {"reference_time_step"}
+        assert own == {f.name for f in dataclasses.fields(member.policy_type) if f.name != "g"}
+    # every key has its form and is listed, with it, in its class's docstring (the API reference)
+    for schema in (Scene, ModelSpec, ContactSpec, PairSpec, InitialState,
+                   *SMOOTHING_KINDS.values()):  # fmt: skip
         for f in dataclasses.fields(schema):
-            assert f"``{f.name}``" in doc, (schema.__name__, f.name)
+            assert f.metadata["form"], (schema.__name__, f.name)
+            assert f"    {f.name}: {f.metadata['form']}" in schema.__doc__, (schema, f.name)
 
 
 def test_a_mistyped_key_is_named_with_its_line_and_the_key_meant(tmp_path):

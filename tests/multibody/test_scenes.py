@@ -11,7 +11,8 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_abs import ContactAware, Exact, Fixed
 from drake_abs.multibody import ComplementarityStepper
-from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
+from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.scene import Scene
 from drake_abs.systems import ComplementarityPlant, autodiff
 

@@ -23,7 +23,9 @@ from drake_abs import ContactAware, Exact, Fixed
 from drake_abs.contact.contact_lcp import contact_step
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody import ComplementarityStepper
-from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model, resolve_model_file
+from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.packages import PACKAGE_DIR
+from drake_abs.multibody.parsing import resolve_model_file
 from drake_abs.multibody.posture import STANDING_GAINS, standing_controller, total_mass
 from drake_abs.multibody.scene import Scene
 
