@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.engine.closed_loop import Trajectory
+
 __all__ = [
     "CLEARANCE",
     "NEAR_LIMIT",
@@ -150,7 +152,7 @@ class Transitions:
     @classmethod
     def from_trajectory(
         cls,
-        trajectory,
+        trajectory: Trajectory,
         *,
         source: str,
         time_step: float,

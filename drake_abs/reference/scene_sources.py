@@ -35,6 +35,7 @@ import numpy as np
 
 from drake_abs._validation import as_finite_array
 from drake_abs.contact.step import Step
+from drake_abs.engine.protocols import Stepper
 from drake_abs.multibody.joint_limits import effort_limits
 from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.reference.mujoco_plant import MujocoStepper
@@ -75,7 +76,7 @@ class SceneSource:
     """
 
     name: str
-    stepper: object
+    stepper: Stepper
     in_contact: Callable[[np.ndarray], np.ndarray]
     time_step: float
 
