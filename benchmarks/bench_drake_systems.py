@@ -1,8 +1,9 @@
 """What the Drake system costs on top of the step it calls: one simulated step of a scene's
 ComplementarityPlant in Drake's Simulator (double, and AutoDiffXd with the state seeded), against
-the same core step called directly on one state (the reference, measured in the same run), and
-beside Drake's own discrete MultibodyPlant with SAP on the same scene (its double and AutoDiffXd
-step where Drake supports it).
+the same core step called directly on one state (the reference, measured in the same run; the
+engine's open loop, with its reverse pass when it has the Jacobians), and beside Drake's own
+discrete MultibodyPlant with SAP on the same scene (:class:`DrakePlantStepper`, its double step
+in the same open loop).
 
 Usage: ``python benchmarks/bench_drake_systems.py [--steps N] [--scenes box_push hopper]``.
 Prints microseconds per step (best of 3) and the ratio to the direct core step.
@@ -17,8 +18,9 @@ import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.systems.analysis import Simulator, Simulator_
 
+from drake_abs.engine import open_loop
 from drake_abs.multibody import build_scene_model
-from drake_abs.reference.drake_twin import make_drake_twin
+from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.systems import ComplementarityPlant
 
 
@@ -36,12 +38,10 @@ def bench_scene(name: str, steps: int) -> dict[str, float]:
     stepper = model.stepper()
     nu = stepper.sizes[2]
     h = stepper.model.h
-    u = np.zeros(nu)
+    u, U = np.zeros(nu), np.zeros((steps, nu))
 
     def core(jacobians: bool):
-        x = model.x0[None]
-        for _ in range(steps):
-            x = stepper.step(x, u[None], jacobians=jacobians).x_next
+        open_loop(stepper, model.x0, U, jacobians=jacobians, on_unconverged="flag")
 
     plant = ComplementarityPlant(stepper, initial_state=model.x0)
 
@@ -60,14 +60,10 @@ def bench_scene(name: str, steps: int) -> dict[str, float]:
         )
         Simulator_[AutoDiffXd](ad, context).AdvanceTo(steps * h)
 
-    twin = make_drake_twin(model.scene, "sap")
+    sap_stepper = DrakePlantStepper(model.scene, "sap")
 
     def sap():
-        context = twin.diagram.CreateDefaultContext()
-        twin.plant.SetPositionsAndVelocities(
-            twin.plant.GetMyMutableContextFromRoot(context), model.x0
-        )
-        Simulator(twin.diagram, context).AdvanceTo(steps * h)
+        open_loop(sap_stepper, model.x0, U, jacobians=False)
 
     rows = {
         "core step, one state, no Jacobian (reference)": _best(lambda: core(False)),

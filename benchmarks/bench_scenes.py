@@ -2,11 +2,12 @@
 
 Measured in the same run, on each shipped scene (drake_abs/scenes/*.yaml):
 
-1. a double step: ours (``ComplementarityStepper.step(jacobians=False)``, exact contact) against
-   the scene's Drake twin (same models, a collision sphere per contact point) with SAP, Similar
-   and Lagged, stepped by ``Simulator.AdvanceTo``; target: ours within 3 times SAP;
-2. a step with its Jacobian: ours (``jacobians=True``: dx+/dx and dx+/du) against one
-   AutoDiffXd step of the SAP twin with derivatives seeded on x and u; target: ours faster;
+1. a double step: ours (``ComplementarityStepper.step(jacobians=False)``, exact contact, at
+   each state of its own rollout) against the scene's Drake twin (same models, a collision
+   sphere per contact point; :class:`DrakePlantStepper`) with SAP, Similar and Lagged, over its
+   own rollout in the engine (``open_loop``); target: ours within 3 times SAP;
+2. a step with its Jacobian: ours (``jacobians=True``: dx+/dx and dx+/du) against the SAP
+   stepper's step with its AutoDiffXd Jacobians, at the same states; target: ours faster;
 3. per-step cost against the number of active contacts (a box edge with n candidate points,
    k of them within the activation distance): cost should follow k, not n.
 
@@ -26,13 +27,12 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_abs/__init__
 
 import numpy as np
-from pydrake.autodiffutils import InitializeAutoDiff
-from pydrake.systems.analysis import Simulator
 
 from drake_abs import Exact
-from drake_abs.multibody.builder import PACKAGE_DIR, build_scene_model
-from drake_abs.multibody.scene import Scene
-from drake_abs.reference.drake_twin import make_drake_twin
+from drake_abs.engine import open_loop
+from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.scene import Scene, shipped_scenes
+from drake_abs.reference.drake_plant import DrakePlantStepper
 
 
 def _best_time(fn, repeats: int) -> float:
@@ -46,21 +46,13 @@ def _best_time(fn, repeats: int) -> float:
     return float(np.min(times))
 
 
-def ours_rollout(scene: Scene, steps: int):
-    """States of a rollout from the scene's initial state with zero actuation."""
+def bench_scene(scene: Scene, steps: int, repeats: int) -> dict:
     sm = build_scene_model(scene)
     stepper = sm.stepper(smoothing=Exact())
-    nu = sm.contact_model.nu
-    xs = [np.concatenate([sm.q0, sm.v0])[None]]
-    for _ in range(steps):
-        xs.append(stepper.step(xs[-1], np.zeros((1, nu)), jacobians=False).x_next)
-    return stepper, np.concatenate(xs)
-
-
-def bench_scene(scene: Scene, steps: int, repeats: int) -> dict:
-    stepper, xs = ours_rollout(scene, steps)
     nu = stepper.sizes[2]
-    u = np.zeros((1, nu))
+    u, U = np.zeros((1, nu)), np.zeros((steps, nu))
+    # the states ours is timed at: its rollout from the scene's initial state, zero actuation
+    xs = open_loop(stepper, sm.x0, U, jacobians=False, on_unconverged="flag").x[0]
     ours = _best_time(lambda: [stepper.step(x[None], u, jacobians=False) for x in xs], repeats)
     ours_jac = _best_time(lambda: [stepper.step(x[None], u, jacobians=True) for x in xs], repeats)
     per = len(xs)
@@ -70,49 +62,20 @@ def bench_scene(scene: Scene, steps: int, repeats: int) -> dict:
         "ours_us": 1e6 * ours / per,
         "ours_jacobian_us": 1e6 * ours_jac / per,
     }
-    nq = stepper.model.nq
-    for name in ("sap", "similar", "lagged"):
-        twin = make_drake_twin(scene, name)
-        sim = Simulator(twin.diagram)
-        ctx = sim.get_mutable_context()
-        pc = twin.plant.GetMyMutableContextFromRoot(ctx)
-        if nu:
-            twin.diagram.get_input_port(0).FixValue(ctx, np.zeros(nu))
-
-        def run(sim=sim, ctx=ctx, pc=pc, twin=twin):
-            ctx.SetTime(0.0)
-            twin.plant.SetPositions(pc, xs[0, :nq])
-            twin.plant.SetVelocities(pc, xs[0, nq:])
-            sim.Initialize()
-            sim.AdvanceTo(steps * scene.time_step)
-
-        row[f"{name}_us"] = 1e6 * _best_time(run, repeats) / steps
+    drake = {name: DrakePlantStepper(scene, name) for name in ("sap", "similar", "lagged")}
+    for name, plant in drake.items():
+        t = _best_time(lambda plant=plant: open_loop(plant, xs[0], U, jacobians=False), repeats)
+        row[f"{name}_us"] = 1e6 * t / steps
     row["ratio_ours_over_sap"] = row["ours_us"] / row["sap_us"]
-    # one AutoDiffXd step of the SAP twin, derivatives on (x, u)
-    twin = make_drake_twin(scene, "sap", sampled_outputs=False)
-    ad = twin.diagram.ToAutoDiffXd()
-    plant_ad = ad.GetSubsystemByName(twin.plant.get_name())
-    ctx = ad.CreateDefaultContext()
-    nx = xs.shape[1]
-    pc = plant_ad.GetMyMutableContextFromRoot(ctx)
-    if nu:
-        ad.get_input_port(0).FixValue(
-            ctx, InitializeAutoDiff(np.zeros((nu, 1)), nx + nu, nx).ravel()
-        )
-
-    def ad_steps():
-        for x in xs:
-            plant_ad.SetPositionsAndVelocities(
-                pc, InitializeAutoDiff(x.reshape(-1, 1), nx + nu, 0).ravel()
-            )
-            ad.EvalUniquePeriodicDiscreteUpdate(ctx)
-
+    # the SAP stepper's step with its AutoDiffXd Jacobians (on x and u) at each of our states
+    zeros = np.zeros((per, nu))
     try:
-        row["drake_autodiff_us"] = 1e6 * _best_time(ad_steps, repeats) / per
+        t = _best_time(lambda: drake["sap"].step(xs, zeros), repeats)
+        row["drake_autodiff_us"] = 1e6 * t / per
         row["ratio_ours_jacobian_over_drake_autodiff"] = (
             row["ours_jacobian_us"] / row["drake_autodiff_us"]
         )
-    except RuntimeError as err:  # e.g. a model file's capsules: no AutoDiffXd penetration query
+    except NotImplementedError as err:  # e.g. capsules: no AutoDiffXd penetration query
         row["drake_autodiff_us"] = row["ratio_ours_jacobian_over_drake_autodiff"] = None
         row["drake_autodiff_unavailable"] = str(err).split(". ")[0]
     return row
@@ -166,8 +129,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     steps, repeats = (20, 3) if args.quick else (100, 5)
-    scenes = sorted((PACKAGE_DIR / "scenes").glob("*.yaml"))
-    rows = [bench_scene(Scene.from_yaml(p), steps, repeats) for p in scenes]
+    rows = [bench_scene(Scene.load(name), steps, repeats) for name in shipped_scenes()]
     print("[1,2] per step (us), same run; ours: exact contact, double / with dx+/dx, dx+/du")
     header = (
         f"{'scene':14s} {'contacts':>8s} {'ours':>9s} {'SAP':>8s} {'Similar':>8s} "

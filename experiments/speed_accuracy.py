@@ -1,47 +1,37 @@
 """The speed/accuracy trade: what each setting costs per simulated second, and how far from the
-truth it lands, for our complementarity plant and Drake's contact models on the same scenes.
+truth it lands, for our complementarity plant and Drake's contact models on the same scenes:
+**box** and **ball** of :mod:`drake_abs.reference.comparison_scenes` (the box pushed off at
+1 m/s slides to rest; the 5 cm ball dropped from 0.3 m and thrown at 1 m/s lands, slides and
+rolls) and shipped articulated scenes (unactuated: they drop and collapse). Every setting starts
+from the same state and runs in the engine (:func:`drake_abs.engine.open_loop`).
 
-Scenes (the two of :mod:`drake_abs.experiments.drake_comparison`, same masses, friction and
-initial states): **box**, the planar box pushed off at 1 m/s that slides to rest on its two
-bottom edges; **ball**, the 5 cm ball dropped from 0.3 m and thrown at 1 m/s, which lands,
-slides and rolls. Every setting starts from the same state.
+Settings, each at every time step h of ``time_steps``: ours exact (the solver's tolerance 1e-12
+and looser ``tolerances``), BS (``Fixed`` mu, stated at h = 10 ms and scaled with h so that the
+barrier acts at the same distance), ABS (``ContactAware``) and Gaussian-matched ABS; Drake's
+discrete plant (:class:`DrakePlantStepper`) with SAP, Similar and Lagged (compliant point
+contact, Drake's documented defaults). MuJoCo is left out: neither scene is an MJCF file.
 
-Settings, each at every time step h of ``time_steps``:
-
-- ours: Exact (hard contact, the solver's default tolerance 1e-12 and the looser ``tolerances``),
-  BS (``Fixed`` mu over ``bs_mu``, given at h = 10 ms and scaled with h so that the barrier acts
-  at the same distance), ABS (``ContactAware``), Gaussian-matched ABS (``GaussianMatched``);
-- Drake: the discrete MultibodyPlant with SAP, Similar and Lagged (compliant point contact,
-  Drake's documented default stiffness and dissipation). MuJoCo is left out: neither scene comes
-  from an MJCF file.
-
-The reference (the "truth") is our Exact plant at ``reference_time_step`` (much finer than any
-h): rigid contact, Coulomb friction. Its own convergence is measured by the same errors of the
-reference at twice its step (``reference_self_error``).
-
-Accuracy measures (all against the reference, on a common time grid every ``sample_period``):
+The reference (the "truth") is our exact plant at ``reference_time_step`` (much finer than any
+h); its own convergence is measured by the same errors at twice its step. Accuracy, against the
+reference on a common time grid every ``sample_period``:
 
 - ``trajectory_error_m``: RMS over the grid of the distance between the body's position and the
-  reference's (m);
-- ``final_error_m``: the same at the last time;
+  reference's (m); ``final_error_m``: the same at the last time;
 - ``penetration_m``: the deepest penetration of any contact point over the run (m);
 - ``energy_error_J``: the largest ``|E(t) - E_ref(t)|`` over the grid, E kinetic plus potential (J);
 - ``gradient_error``: ||G - G_ref|| / ||G_ref|| (Frobenius), G the derivatives of the final
   position with respect to two inputs (box: initial speed and push; ball: initial speed and
-  height), ours by the engine's reverse pass, Drake's by AutoDiffXd. G_ref is the reference's
-  slope at the scale of the motion: the least-squares slope of its final position over
-  ``fd_points`` perturbations spread over +-``fd_half_width``. An infinitesimal central
-  difference would not do: the exact discrete model's landing happens at a whole step, so its
-  final position is piecewise constant in the drop height (derivative 0; the rigid-body answer
-  is 2/7 v_0 / (g t_land)). The analytic rigid-body slopes are reported beside G_ref.
+  height), by the engine's reverse pass over each model's one-step Jacobians (ours implicit,
+  Drake's from AutoDiffXd). G_ref is the reference's least-squares slope of its final position
+  over ``fd_points`` perturbations spread over +-``fd_half_width``, the slope at the scale of the
+  motion: the exact discrete model lands at a whole step, so its final position is piecewise
+  constant in the drop height (derivative 0; the rigid-body answer is 2/7 v_0 / (g t_land)). The
+  analytic rigid-body slopes are reported beside G_ref.
 
 Cost: wall-clock seconds per simulated second of one rollout, in double (``cost_s_per_s``) and
-with the gradient (``gradient_cost_s_per_s``), the best of ``repeats`` timings, each setting
-measured in the same run.
-
-Outputs in ``out``: ``summary.json`` (every setting), ``speed_accuracy.png`` (accuracy against
-cost, one panel per scene and measure) and ``speed_accuracy.md`` (the table: for each accuracy,
-the cheapest setting that reaches it).
+with the gradient (``gradient_cost_s_per_s``), the best of ``repeats`` timings. Outputs in
+``out``: ``summary.json``, ``speed_accuracy.png`` (accuracy against cost) and
+``speed_accuracy.md`` (for each accuracy, the cheapest setting that reaches it; every row).
 """
 
 from __future__ import annotations
@@ -54,10 +44,14 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.unconverged import UnconvergedStepError
-from drake_abs.experiments import drake_comparison as dc
 from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
+from drake_abs.reference.comparison_scenes import SCENES, ComparisonScenes
+from drake_abs.reference.drake_twin import APPROXIMATION_LABELS
 
 NAME = "speed-accuracy"
+OURS = (*SMOOTHINGS, "gaussian")  # our settings' families; the others are Drake's
+GAUSSIAN = "adaptive barrier smoothing (ABS, Gaussian-matched mu)"
 
 _SPECIAL = {  # the inputs G differentiates with respect to, and the analytic slopes' entries
     "box": {"x0_columns": (3,), "push": True, "names": ("vx_0", "push"),
@@ -65,46 +59,6 @@ _SPECIAL = {  # the inputs G differentiates with respect to, and the analytic sl
     "ball": {"x0_columns": (7, 2), "push": False, "names": ("vy_0", "z_0"),
              "analytic": (("dy_T/dvy_0", 1, 0), ("dy_T/dz_0", 1, 1))},
 }  # fmt: skip
-
-
-def scene_inputs(scene: str) -> dict:
-    """What G is for a scene: ``rows``, the final position's coordinates (the plant's prismatic
-    joints: the translation of the base); ``x0_columns`` and ``push``, the inputs (box and ball
-    as above; an articulated scene: the base's initial horizontal and vertical speeds, the
-    first and last prismatic joints' velocities); their ``names``; the ``analytic`` entries."""
-    from drake_abs.multibody import build_scene_model
-
-    model = build_scene_model(_scene_spec(scene, None))
-    plant = model.plant
-    prismatic = [plant.get_joint(j) for j in plant.GetJointIndices()
-                 if plant.get_joint(j).type_name() == "prismatic"]  # fmt: skip
-    rows = tuple(j.position_start() for j in prismatic)
-    if scene in _SPECIAL:
-        return {"rows": rows, **_SPECIAL[scene]}
-    nq = plant.num_positions()
-    first, last = prismatic[0], prismatic[-1]
-    return {
-        "rows": rows,
-        "x0_columns": (nq + first.velocity_start(), nq + last.velocity_start()),
-        "push": False,
-        "names": (f"v_{first.name()}_0", f"v_{last.name()}_0"),
-        "analytic": (),
-    }
-
-
-def _scene_spec(scene: str, config: Config | None, time_step: float | None = None):
-    """The scene (box and ball: drake_comparison's, from ``config.scene_config``; otherwise the
-    shipped scene of that name), at ``time_step`` if given."""
-    from drake_abs.multibody import Scene
-
-    if scene in _SPECIAL:
-        cfg = config.scene_config if config is not None else dc.Config()
-        h = time_step or cfg.time_step
-        return dc.our_scene(scene, h, cfg, "exact")
-    spec = Scene.load(scene)
-    return replace(spec, time_step=time_step) if time_step else spec
-
-
 _TIERS = (1e-2, 1e-3, 1e-4)  # trajectory errors (m) the table asks for
 
 
@@ -113,14 +67,14 @@ class Config:
     """Settings (SI units). A larger mu or sigma is more smoothing.
 
     Attributes:
-        scenes: ``"box"``, ``"ball"`` (drake_comparison's) and shipped articulated scenes
-            (unactuated: they drop and collapse).
+        scenes: ``"box"``, ``"ball"`` (:class:`ComparisonScenes`) and shipped articulated
+            scenes (unactuated: they drop and collapse).
         time_steps: the steps h every setting runs at (s); each must divide ``sample_period``.
         reference_time_step: the reference's step (s).
         sample_period: the common time grid of the errors (s).
         bs_mu: BS's mu values at h = 10 ms (N s m), scaled with h.
         gaussian_sigma: GaussianMatched's width (m, in the normal rows' units).
-        tolerances: looser solver tolerances run with Exact (the default 1e-12 always runs).
+        tolerances: looser solver tolerances run with exact contact (1e-12 always runs).
         drake: Drake's discrete contact approximations to run.
         fd_half_width: per scene (box, ball), the half widths of the reference gradient's
             perturbations of each input (box: m/s, N; ball: m/s, m).
@@ -130,7 +84,7 @@ class Config:
         articulated_half_width: the reference gradient's perturbation of their base speeds
             (m/s).
         scene_config: the box's and ball's parameters (masses, friction, speeds, durations,
-            ABS).
+            ABS, Drake's material).
     """
 
     scenes: tuple[str, ...] = ("box", "ball", "hopper", "half_cheetah", "solo12_drop")
@@ -146,7 +100,9 @@ class Config:
     repeats: int = 2
     articulated_duration: float = 0.5
     articulated_half_width: float = 0.05
-    scene_config: dc.Config = field(default_factory=lambda: dc.Config(ball_duration=1.0))
+    scene_config: ComparisonScenes = field(
+        default_factory=lambda: ComparisonScenes(ball_duration=1.0)
+    )
 
     @classmethod
     def test_size(cls) -> Config:
@@ -160,7 +116,7 @@ class Config:
             fd_points=5,
             scenes=("box", "ball", "hopper"),
             articulated_duration=0.2,
-            scene_config=dc.Config(ball_duration=0.5, box_duration=0.3),
+            scene_config=ComparisonScenes(ball_duration=0.5, box_duration=0.3),
         )
 
 
@@ -170,23 +126,23 @@ class Setting:
 
     family: str  # "exact", "bs", "abs", "gaussian", or Drake's "sap", "similar", "lagged"
     time_step: float
-    value: float | None = None  # mu (BS), tol (Exact), sigma (Gaussian)
+    value: float | None = None  # mu (BS), tol (exact), sigma (Gaussian)
 
     @property
     def ours(self) -> bool:
-        return self.family in ("exact", "bs", "abs", "gaussian")
+        return self.family in OURS
+
+    @property
+    def name(self) -> str:
+        """The family's display name: ours by the smoothing registry, Drake's approximation."""
+        if self.family in SMOOTHINGS:
+            return f"ours, {SMOOTHINGS[self.family]}"
+        return f"ours, {GAUSSIAN}" if self.ours else f"Drake {APPROXIMATION_LABELS[self.family]}"
 
     @property
     def label(self) -> str:
-        name = {
-            "exact": "ours Exact", "bs": "ours BS", "abs": "ours ABS",
-            "gaussian": "ours Gaussian-matched", "sap": "Drake SAP", "similar": "Drake Similar",
-            "lagged": "Drake Lagged",
-        }[self.family]  # fmt: skip
-        if self.family == "exact" and self.value is not None:
-            name += f" tol={self.value:g}"
-        elif self.family == "bs" and self.value is not None:
-            name += f" mu={self.value:g}"
+        value = {"exact": "tol", "bs": "mu"}.get(self.family) if self.value is not None else None
+        name = self.name + (f", {value}={self.value:g}" if value else "")
         return f"{name}, h={1e3 * self.time_step:g} ms"
 
 
@@ -196,42 +152,77 @@ def settings(config: Config) -> list[Setting]:
         out.append(Setting("exact", h))
         out += [Setting("exact", h, tol) for tol in config.tolerances]
         out += [Setting("bs", h, mu) for mu in config.bs_mu]
-        out.append(Setting("abs", h))
-        out.append(Setting("gaussian", h, config.gaussian_sigma))
+        out += [Setting("abs", h), Setting("gaussian", h, config.gaussian_sigma)]
         out += [Setting(name, h) for name in config.drake]
     return out
+
+
+def scene_inputs(scene: str) -> dict:
+    """What G is for a scene: ``rows``, the final position's coordinates (the plant's prismatic
+    joints: the translation of the base); ``x0_columns`` and ``push``, the inputs (box and ball
+    as above; an articulated scene: the base's initial horizontal and vertical speeds, the
+    first and last prismatic joints' velocities); their ``names``; the ``analytic`` entries."""
+    from drake_abs.multibody import build_scene_model
+
+    plant = build_scene_model(_scene_spec(scene, Config())).plant
+    prismatic = [plant.get_joint(j) for j in plant.GetJointIndices()
+                 if plant.get_joint(j).type_name() == "prismatic"]  # fmt: skip
+    rows = tuple(j.position_start() for j in prismatic)
+    if scene in _SPECIAL:
+        return {"rows": rows, **_SPECIAL[scene]}
+    nq, first, last = plant.num_positions(), prismatic[0], prismatic[-1]
+    return {
+        "rows": rows,
+        "x0_columns": (nq + first.velocity_start(), nq + last.velocity_start()),
+        "push": False,
+        "names": (f"v_{first.name()}_0", f"v_{last.name()}_0"),
+        "analytic": (),
+    }
+
+
+def _scene_spec(scene: str, config: Config, time_step: float | None = None):
+    """The scene (box and ball from ``config.scene_config``; otherwise the shipped scene of that
+    name), at ``time_step`` if given."""
+    from drake_abs.multibody import Scene
+
+    if scene in SCENES:
+        return config.scene_config.scene(scene, time_step)
+    spec = Scene.load(scene)
+    return replace(spec, time_step=time_step) if time_step else spec
 
 
 # ----------------------------------------------------------------------------------------------
 # one rollout of a setting
 
 
-def _our_stepper(scene: str, s: Setting, config: Config):
-    """The scene's complementarity stepper under the setting's smoothing and tolerance."""
+def _stepper(scene: str, s: Setting, config: Config):
+    """The setting's stepper: ours under its smoothing (mu stated at the scene config's step,
+    scaled to h) and tolerance, or Drake's plant (the box's and ball's material from the scene
+    config; an articulated scene with Drake's default material)."""
+    from drake_abs.contact.smoothing import GaussianMatched, TimeStepScaled
     from drake_abs.multibody import build_scene_model
+    from drake_abs.reference.drake_plant import DrakePlantStepper
 
-    cfg = config.scene_config
+    spec, cfg = _scene_spec(scene, config, s.time_step), config.scene_config
+    if not s.ours:
+        material = cfg.drake_material() if scene in SCENES else None
+        return DrakePlantStepper(spec, s.family, time_step=s.time_step, material=material)
     i = 1 if scene == "ball" else 0  # ABS as for the box, but for the ball
-    # mu is impulse x distance: stated at cfg.time_step, scaled to h by the scene (module doc)
-    href = cfg.time_step
-    smoothing = {
-        "exact": {"kind": "exact"},
-        "bs": {"kind": "fixed", "value": s.value or 0.0, "reference_time_step": href},
-        "abs": {"kind": "contact_aware", "mu_max": cfg.abs_mu_max[i],
-                "length": cfg.abs_length[i], "reference_time_step": href},
-        "gaussian": {"kind": "gaussian_matched", "sigma": s.value},
-    }[s.family]  # fmt: skip
-    spec = replace(_scene_spec(scene, config, s.time_step), smoothing=smoothing)
+    if s.family == "gaussian":
+        smoothing = GaussianMatched(s.value)
+    else:
+        smoothing = TimeStepScaled.between(smoothing_policy(
+            s.family, mu=s.value or 0.0, contact_aware=(cfg.abs_mu_max[i], cfg.abs_length[i])
+        ), s.time_step, cfg.time_step)  # fmt: skip
     options = {"tol": s.value} if s.family == "exact" and s.value is not None else {}
-    return build_scene_model(spec).stepper(gradient="total", **options)
+    return build_scene_model(spec).stepper(smoothing=smoothing, gradient="total", **options)
 
 
 def _inputs(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, float]:
-    """(x0, the constant input, simulated seconds): box and ball as drake_comparison; an
+    """(x0, the constant input, simulated seconds): box and ball from the scene config; an
     articulated scene from its initial state, unactuated."""
-    if scene in _SPECIAL:
-        x0, u, duration, _ = dc.scene_setup(scene, config.scene_config)
-        return x0, u, duration
+    if scene in SCENES:
+        return config.scene_config.start(scene)
     from drake_abs.multibody import build_scene_model
 
     model = build_scene_model(_scene_spec(scene, config))
@@ -240,9 +231,7 @@ def _inputs(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, float]:
 
 def _selected(spec: dict, dx_dx0: np.ndarray, dx_du: np.ndarray) -> np.ndarray:
     """G: the final position's derivatives with respect to the scene's two inputs."""
-    cols = [dx_dx0[:, c] for c in spec["x0_columns"]]
-    if spec["push"]:
-        cols.append(dx_du[:, 0])
+    cols = [dx_dx0[:, c] for c in spec["x0_columns"]] + ([dx_du[:, 0]] if spec["push"] else [])
     return np.stack(cols, axis=1)[list(spec["rows"])]
 
 
@@ -257,47 +246,22 @@ def _best_of(repeats: int, fn):
     return best, first
 
 
-def _drake_model(scene: str, s: Setting, config: Config) -> dc.DrakeModel:
-    """Drake's discrete plant of the scene at the setting's step (box and ball as in
-    drake_comparison; an articulated scene as its generic twin, Drake's default material)."""
-    if scene in _SPECIAL:
-        return dc.build_drake_model(scene, s.family, s.time_step, config.scene_config)
-    from drake_abs.reference.drake_twin import make_drake_twin
-
-    spec = _scene_spec(scene, config, s.time_step)
-    twin = make_drake_twin(spec, s.family, sampled_outputs=False)
-    return dc.DrakeModel(s.family, s.family, "point", s.time_step, twin.diagram, twin.plant)
-
-
 def run_setting(scene: str, s: Setting, config: Config, x0, u, duration, spec: dict) -> dict:
     """States, cost and G of one setting (one rollout in double, one with the gradient)."""
     from drake_abs.engine import open_loop
 
-    n = int(round(duration / s.time_step))
-    if s.ours:
-        stepper = _our_stepper(scene, s, config)
-        U = np.tile(u, (n, 1)) if u.size else np.zeros((n, 0))
-        forward, traj = _best_of(config.repeats, lambda: open_loop(
-            stepper, x0, U, jacobians=False, on_unconverged="flag"))  # fmt: skip
-        with_gradient, grad = _best_of(config.repeats, lambda: open_loop(
-            stepper, x0, U, on_unconverged="flag"))  # fmt: skip
-        xs = traj.x[0]
-        G = _selected(spec, grad.dxH_dx0[0], grad.dxH_du[0].sum(axis=0))
-        unconverged = int((~traj.converged).sum())
-    else:
-        model = _drake_model(scene, s, config)
-        runs = [dc.drake_rollout(model, x0, u, n) for _ in range(config.repeats)]
-        xs, forward = runs[0][0], n * min(r[1] for r in runs)
-        grads = [dc.drake_gradients(model, x0, u, n) for _ in range(config.repeats)]
-        g, with_gradient = grads[0], n * min(r["seconds"] for r in grads)
-        G = _selected(spec, g["dx_dx0"], g["dx_du"])
-        unconverged = 0
+    stepper = _stepper(scene, s, config)
+    U = np.tile(u, (int(round(duration / s.time_step)), 1))
+    forward, traj = _best_of(config.repeats, lambda: open_loop(
+        stepper, x0, U, jacobians=False, on_unconverged="flag"))  # fmt: skip
+    with_gradient, grad = _best_of(config.repeats, lambda: open_loop(
+        stepper, x0, U, on_unconverged="flag"))  # fmt: skip
     return {
-        "xs": xs,
-        "G": G,
+        "xs": traj.x[0],
+        "G": _selected(spec, grad.dxH_dx0[0], grad.dxH_du[0].sum(axis=0)),
         "cost_s_per_s": forward / duration,
         "gradient_cost_s_per_s": with_gradient / duration,
-        "unconverged_steps": unconverged,
+        "unconverged_steps": int((~traj.converged).sum()),
     }
 
 
@@ -352,24 +316,22 @@ class Measures:
 
 
 def reference(scene: str, config: Config, spec: dict) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The reference states at ``reference_time_step``, G_ref by central differences of its
+    """The reference states at ``reference_time_step``, G_ref by the least-squares slope of its
     final position, and the reference's own errors at twice its step."""
     from drake_abs.engine import open_loop
 
     x0, u, duration = _inputs(scene, config)
 
-    def final_states(h: float, x, push) -> np.ndarray:
-        stepper = _our_stepper(scene, Setting("exact", h), config)
-        n = int(round(duration / h))
-        U = np.tile(push, (n, 1)) if push.size else np.zeros((n, 0))
-        traj = open_loop(stepper, x, U, jacobians=False, on_unconverged="raise")
-        return traj.x[0]
+    def states(h: float, x, push) -> np.ndarray:
+        stepper = _stepper(scene, Setting("exact", h), config)
+        U = np.tile(push, (int(round(duration / h)), 1))
+        return open_loop(stepper, x, U, jacobians=False, on_unconverged="raise").x[0]
 
     h = config.reference_time_step
-    xs = final_states(h, x0, u)
+    xs = states(h, x0, u)
     widths = (
-        config.fd_half_width[0 if scene == "box" else 1]
-        if scene in _SPECIAL
+        config.fd_half_width[SCENES.index(scene)]
+        if scene in SCENES
         else (config.articulated_half_width,) * 2
     )
     cols = []
@@ -382,12 +344,10 @@ def reference(scene: str, config: Config, spec: dict) -> tuple[np.ndarray, np.nd
                 x[spec["x0_columns"][j]] += d
             else:
                 push = push + d
-            finals.append(final_states(h, x, push)[-1])
+            finals.append(states(h, x, push)[-1])
         cols.append(np.polyfit(deltas, np.array(finals), 1)[0])  # the least-squares slope
     G_ref = np.stack(cols, axis=1)[list(spec["rows"])]
-    coarse = final_states(2 * h, x0, u)
-    m = Measures(scene, config, xs, G_ref, spec)
-    self_error = m.errors(coarse, 2 * h, G_ref)
+    self_error = Measures(scene, config, xs, G_ref, spec).errors(states(2 * h, x0, u), 2 * h, G_ref)
     self_error.pop("gradient_error")
     return xs, G_ref, self_error
 
@@ -413,7 +373,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             bar.update(1 + len(settings(config)))
             continue
         bar.update()
-        analytic = dc.analytic_gradients(scene, config.scene_config) if scene in _SPECIAL else {}
+        analytic = config.scene_config.rigid_slopes(scene) if scene in SCENES else {}
         measures = Measures(scene, config, xs_ref, G_ref, spec)
         x0, u, duration = _inputs(scene, config)
         rows = []
@@ -423,9 +383,8 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             bar.update()
             rows.append({
                 "label": s.label, "family": s.family, "time_step": s.time_step, "value": s.value,
-                "cost_s_per_s": r["cost_s_per_s"],
-                "gradient_cost_s_per_s": r["gradient_cost_s_per_s"],
-                "unconverged_steps": r["unconverged_steps"],
+                **{k: r[k] for k in ("cost_s_per_s", "gradient_cost_s_per_s",
+                                     "unconverged_steps")},
                 **measures.errors(r["xs"], s.time_step, r["G"]),
                 "G": r["G"].tolist(),
             })  # fmt: skip
@@ -458,13 +417,11 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
 
 
 def cheapest(rows: list[dict]) -> dict:
-    """For each trajectory-error tier, the cheapest of ours and of Drake's that reach it (and
-    the cheapest gradient setting whose gradient error is below 10 %)."""
+    """For each trajectory-error tier, the cheapest of ours and of Drake's that reach it."""
     out = {}
     for tier in _TIERS:
         for who, ours in (("ours", True), ("drake", False)):
-            ok = [r for r in rows
-                  if (r["family"] in ("exact", "bs", "abs", "gaussian")) == ours
+            ok = [r for r in rows if (r["family"] in OURS) == ours
                   and r["trajectory_error_m"] <= tier and r["unconverged_steps"] == 0]  # fmt: skip
             best = min(ok, key=lambda r: r["cost_s_per_s"]) if ok else None
             out[f"{who}@{tier:g}"] = None if best is None else {
@@ -488,7 +445,7 @@ def report(summary: dict) -> str:
             continue
         ref = s["reference"]
         lines += [
-            f"## {scene} ({s['duration_s']:g} s simulated; reference: ours Exact at "
+            f"## {scene} ({s['duration_s']:g} s simulated; reference: ours, exact, at "
             f"h = {1e3 * ref['time_step']:g} ms, its own trajectory error at twice the step "
             f"{_fmt(ref['self_error_at_twice_the_step']['trajectory_error_m'])} m)",
             "",
@@ -497,13 +454,12 @@ def report(summary: dict) -> str:
             "| --- | --- | --- | --- | --- | --- | --- |",
         ]
         for tier in _TIERS:
-            a, b = s["cheapest"][f"ours@{tier:g}"], s["cheapest"][f"drake@{tier:g}"]
-            lines.append(
-                f"| {tier:g} m | {a['label'] if a else 'none'} | "
-                f"{_fmt(a and a['cost_s_per_s'])} | {_fmt(a and a['gradient_error'])} | "
-                f"{b['label'] if b else 'none'} | {_fmt(b and b['cost_s_per_s'])} | "
-                f"{_fmt(b and b['gradient_error'])} |"
-            )
+            cells = [f"{tier:g} m"]
+            for who in ("ours", "drake"):
+                b = s["cheapest"][f"{who}@{tier:g}"]
+                cells += [b["label"] if b else "none", _fmt(b and b["cost_s_per_s"]),
+                          _fmt(b and b["gradient_error"])]  # fmt: skip
+            lines.append("| " + " | ".join(cells) + " |")
         lines += [
             "",
             "| setting | s per sim. s | with gradient | trajectory error (m) | "
@@ -511,14 +467,11 @@ def report(summary: dict) -> str:
             "unconverged steps |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
+        keys = ("cost_s_per_s", "gradient_cost_s_per_s", "trajectory_error_m", "final_error_m",
+                "penetration_m", "energy_error_J", "gradient_error")  # fmt: skip
         for r in s["rows"]:
-            lines.append(
-                f"| {r['label']} | {_fmt(r['cost_s_per_s'])} | "
-                f"{_fmt(r['gradient_cost_s_per_s'])} | {_fmt(r['trajectory_error_m'])} | "
-                f"{_fmt(r['final_error_m'])} | {_fmt(r['penetration_m'])} | "
-                f"{_fmt(r['energy_error_J'])} | {_fmt(r['gradient_error'])} | "
-                f"{r['unconverged_steps']} |"
-            )
+            cells = [r["label"], *(_fmt(r[k]) for k in keys), str(r["unconverged_steps"])]
+            lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     return "\n".join(lines)
 
@@ -536,26 +489,22 @@ def plot(summary: dict, path: Path) -> None:
 
     scenes = [k for k, v in summary["scenes"].items() if "rows" in v]
     measures = (
-        ("trajectory_error_m", "cost_s_per_s", "trajectory error (m)"),
-        ("gradient_error", "gradient_cost_s_per_s", "gradient error (relative)"),
-    )
-    cost_labels = {
-        "cost_s_per_s": "cost of the rollout (s per simulated s)",
-        "gradient_cost_s_per_s": "cost with the gradient (s per simulated s)",
-    }
+        ("trajectory_error_m", "cost_s_per_s", "trajectory error (m)", "of the rollout"),
+        ("gradient_error", "gradient_cost_s_per_s", "gradient error (relative)",
+         "with the gradient"),
+    )  # fmt: skip
     fig, axes = plt.subplots(len(scenes), 2, figsize=(11, 4.2 * len(scenes)), squeeze=False)
     for i, scene in enumerate(scenes):
-        for j, (err, cost, ylabel) in enumerate(measures):
+        for j, (err, cost, ylabel, what) in enumerate(measures):
             ax = axes[i, j]
             for family, (color, marker) in _STYLE.items():
                 rows = [r for r in summary["scenes"][scene]["rows"] if r["family"] == family]
-                if not rows:
-                    continue
-                h = np.array([r["time_step"] for r in rows])
-                ax.scatter([r[cost] for r in rows], [max(r[err], 1e-12) for r in rows],
-                           s=20 + 1.2e4 * h, c=color, marker=marker, alpha=0.75,
-                           label=_family_label(family))  # fmt: skip
-            ax.set(xscale="log", yscale="log", xlabel=cost_labels[cost],
+                if rows:
+                    h = np.array([r["time_step"] for r in rows])
+                    ax.scatter([r[cost] for r in rows], [max(r[err], 1e-12) for r in rows],
+                               s=20 + 1.2e4 * h, c=color, marker=marker, alpha=0.75,
+                               label=Setting(family, 0.01).name)  # fmt: skip
+            ax.set(xscale="log", yscale="log", xlabel=f"cost {what} (s per simulated s)",
                    ylabel=ylabel, title=f"{scene}: {ylabel} against cost")  # fmt: skip
             ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             ax.grid(True, which="both", alpha=0.3)
@@ -563,15 +512,3 @@ def plot(summary: dict, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-_FAMILY_LABELS = {
-    "exact": "ours, exact",
-    "bs": "ours, barrier smoothing",
-    "abs": "ours, adaptive (ABS), contact-aware",
-    "gaussian": "ours, adaptive (ABS), Gaussian-matched",
-}
-
-
-def _family_label(family: str) -> str:
-    return _FAMILY_LABELS.get(family) or Setting(family, 0.01).label.rsplit(",", 1)[0]

@@ -24,7 +24,7 @@ import numpy as np
 from drake_abs._validation import batch_of_states
 from drake_abs.contact.step import Step
 from drake_abs.multibody.scene import Scene
-from drake_abs.reference.drake_twin import APPROXIMATIONS, make_drake_twin
+from drake_abs.reference.drake_twin import APPROXIMATIONS, hydroelastic_settings, make_drake_twin
 
 __all__ = ["DrakePlantStepper"]
 
@@ -41,6 +41,11 @@ class DrakePlantStepper:
         material: point-contact parameters ``point_stiffness`` (N/m),
             ``hunt_crossley_dissipation`` (s/m), ``relaxation_time`` (s, SAP); Drake's defaults
             for the missing ones.
+        hydroelastic: None (point contact), or hydroelastic contact: ``modulus`` (Pa),
+            ``resolution_hint`` (m), ``ground_thickness`` (m), as
+            :func:`~drake_abs.reference.drake_twin.make_drake_twin` takes them. The scene's
+            point candidates are then not modelled: ``impulse`` has no columns (nc = 0), and
+            Jacobians exist only where Drake differentiates hydroelastic contact.
 
     ``step`` returns, besides the state: ``impulse`` (B, nc) the normal contact impulse (N s)
     of each of the scene's nc contact candidates over the step (Drake's contact force at the
@@ -58,6 +63,7 @@ class DrakePlantStepper:
         *,
         time_step: float | None = None,
         material: dict | None = None,
+        hydroelastic: dict | None = None,
     ):
         if approximation not in APPROXIMATIONS:
             raise ValueError(
@@ -69,12 +75,13 @@ class DrakePlantStepper:
         self.approximation = approximation
         self.time_step = float(time_step or self.scene.time_step)
         self.material = None if material is None else dict(material)
+        self.hydroelastic = hydroelastic_settings(hydroelastic)
         self._build()
 
     def _build(self) -> None:
         twin = make_drake_twin(
             self.scene, self.approximation, time_step=self.time_step, sampled_outputs=False,
-            material=self.material,
+            material=self.material, hydroelastic=self.hydroelastic,
         )  # fmt: skip
         self.twin = twin
         plant = twin.plant
@@ -95,7 +102,8 @@ class DrakePlantStepper:
 
     # pickling: Drake's systems cannot be pickled; the settings are, and rebuild the twin
     def __getstate__(self) -> dict:
-        return {k: getattr(self, k) for k in ("scene", "approximation", "time_step", "material")}
+        keys = ("scene", "approximation", "time_step", "material", "hydroelastic")
+        return {k: getattr(self, k) for k in keys}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)

@@ -4,7 +4,11 @@ scene's contact points (listed, or expanded from a body's collision shapes as
 :func:`~drake_abs.multibody.builder.scene_contacts` does), the collision shapes of each
 body-body pair, and a ground box, so that Drake and this project simulate the same contacts side
 by side. Collision filters leave only the scene's contacts active: point contacts against the
-ground, and each pair's shapes against each other."""
+ground, and each pair's shapes against each other.
+
+With ``hydroelastic`` settings the twin uses Drake's hydroelastic contact instead: each body
+that carries the scene's ground contacts collides through its drawn (visual) shapes, made
+compliant hydroelastic, against a rigid hydroelastic ground box."""
 
 from __future__ import annotations
 
@@ -12,7 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import (
+    AddCompliantHydroelasticProperties,
     AddContactMaterial,
+    AddRigidHydroelasticProperties,
     Box,
     Capsule,
     CollisionFilterDeclaration,
@@ -43,8 +49,17 @@ APPROXIMATIONS = {
     "lagged": DiscreteContactApproximation.kLagged,
 }
 
+#: Display names of the approximations (tables, plots: "Drake SAP").
+APPROXIMATION_LABELS = {"sap": "SAP", "similar": "Similar", "lagged": "Lagged"}
+
 #: Radius (m) of the collision sphere standing in for a point contact (radius 0).
 POINT_RADIUS = 1e-3
+
+#: Hydroelastic settings and their defaults: the compliant shapes' hydroelastic modulus (Pa,
+#: required), the meshes' resolution hint (m) and the rigid ground box's thickness (m).
+HYDROELASTIC_DEFAULTS = {"modulus": None, "resolution_hint": 0.05, "ground_thickness": 0.1}
+#: Width (m) of the rigid hydroelastic ground box (square).
+HYDROELASTIC_GROUND_WIDTH = 20.0
 
 
 @dataclass(frozen=True)
@@ -66,6 +81,24 @@ def _properties(mu: float, material: dict | None) -> ProximityProperties:
     if "relaxation_time" in material:
         props.AddProperty("material", "relaxation_time", material["relaxation_time"])
     return props
+
+
+def hydroelastic_settings(hydroelastic: dict | None) -> dict | None:
+    """``hydroelastic`` with its defaults filled in (:data:`HYDROELASTIC_DEFAULTS`), checked:
+    ``ValueError`` names an unknown key or a value that is not a finite number > 0."""
+    if hydroelastic is None:
+        return None
+    if not isinstance(hydroelastic, dict) or set(hydroelastic) - set(HYDROELASTIC_DEFAULTS):
+        raise ValueError(
+            f"hydroelastic must be a dict with keys among {sorted(HYDROELASTIC_DEFAULTS)}; "
+            f"got {hydroelastic!r}"
+        )
+    out = {**HYDROELASTIC_DEFAULTS, **hydroelastic}
+    for key, value in out.items():
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (number and np.isfinite(value) and value > 0):
+            raise ValueError(f"hydroelastic[{key!r}] must be a finite number > 0; got {value!r}")
+    return out
 
 
 def _body(plant: MultibodyPlant, name: str, model: str | None):
@@ -90,6 +123,7 @@ def make_drake_twin(
     time_step: float | None = None,
     sampled_outputs: bool = True,
     material: dict | None = None,
+    hydroelastic: dict | None = None,
 ) -> DrakeTwin:
     """The scene as a discrete Drake MultibodyPlant with ``approximation`` in sap, similar,
     lagged. Coordinates match :func:`~drake_abs.multibody.builder.build_scene_model`
@@ -97,9 +131,19 @@ def make_drake_twin(
 
     ``material``: optional point-contact parameters ``point_stiffness`` (N/m),
     ``hunt_crossley_dissipation`` (s/m) and ``relaxation_time`` (s, SAP); Drake's defaults
-    otherwise."""
+    otherwise.
+
+    ``hydroelastic``: None (point contact, above), or hydroelastic contact with settings
+    ``modulus`` (Pa), ``resolution_hint`` (m, default 0.05) and ``ground_thickness`` (m, default
+    0.1): each body with ground contacts in the scene collides through its visual shapes (as its
+    model file draws them), compliant with that modulus, and the ground is a rigid box
+    :data:`HYDROELASTIC_GROUND_WIDTH` m square and ``ground_thickness`` thick, its top at the
+    ground height. The material applies to both; a body's friction is its contacts' largest
+    coefficient. Scenes with body-body pairs are refused (``ValueError``), as are bodies with
+    no visual shape."""
     if approximation not in APPROXIMATIONS:
         raise ValueError(f"approximation must be one of {sorted(APPROXIMATIONS)}")
+    hydro = hydroelastic_settings(hydroelastic)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step or scene.time_step)
     add_scene_models(plant, scene, Parser(plant, scene_graph), collisions=False)
@@ -111,15 +155,20 @@ def make_drake_twin(
     # Drake combines friction as 2 mu1 mu2 / (mu1 + mu2): the ground carries the scene's largest
     # coefficient and each point the value that combines with it to the point's own
     mu_ground = max((c.friction or 0.0) for c in points) if points else 0.0
-    ground = plant.RegisterCollisionGeometry(
-        plant.world_body(),
-        RigidTransform([0.0, 0.0, scene.ground_height - 0.5]),
-        Box(50.0, 50.0, 1.0),
-        "ground",
-        _properties(mu_ground, material),
-    )
-    on_ground, pairs = [], []
-    for k, contact in enumerate(contacts):
+    if hydro is not None:
+        ground, on_ground = _hydroelastic_contacts(plant, scene_graph, scene, points, mu_ground,
+                                                   material, hydro)  # fmt: skip
+    else:
+        ground = plant.RegisterCollisionGeometry(
+            plant.world_body(),
+            RigidTransform([0.0, 0.0, scene.ground_height - 0.5]),
+            Box(50.0, 50.0, 1.0),
+            "ground",
+            _properties(mu_ground, material),
+        )
+        on_ground = []
+    pairs = []
+    for k, contact in enumerate(contacts if hydro is None else ()):
         if isinstance(contact, PairContact):
             # the pair's own copies of its two shapes, both with the pair's coefficient
             mu = contact.friction or 0.0
@@ -150,7 +199,7 @@ def make_drake_twin(
     for g_a, g_b in pairs:
         declaration.AllowBetween(GeometrySet([g_a]), GeometrySet([g_b]))
     scene_graph.collision_filter_manager().Apply(declaration)
-    plant.set_contact_model(ContactModel.kPoint)
+    plant.set_contact_model(ContactModel.kPoint if hydro is None else ContactModel.kHydroelastic)
     plant.set_discrete_contact_approximation(APPROXIMATIONS[approximation])
     plant.SetUseSampledOutputPorts(sampled_outputs)
     plant.Finalize()
@@ -159,3 +208,41 @@ def make_drake_twin(
     builder.ExportOutput(plant.get_state_output_port(), "state")
     diagram = builder.Build()
     return DrakeTwin(diagram, plant, scene_graph)
+
+
+def _hydroelastic_contacts(plant, scene_graph, scene, points, mu_ground, material, hydro):
+    """The rigid ground box and each contact body's visual shapes as compliant hydroelastic
+    collision geometry (``hydroelastic_<body>_<j>``); returns (ground id, the shapes' ids)."""
+    if scene.pairs:
+        raise ValueError("hydroelastic: the twin supports ground contacts only (no pairs)")
+    t, hint = hydro["ground_thickness"], hydro["resolution_hint"]
+    props = _properties(mu_ground, material)
+    AddRigidHydroelasticProperties(hint, props)
+    ground = plant.RegisterCollisionGeometry(
+        plant.world_body(),
+        RigidTransform([0.0, 0.0, scene.ground_height - t / 2]),
+        Box(HYDROELASTIC_GROUND_WIDTH, HYDROELASTIC_GROUND_WIDTH, t),
+        "ground",
+        props,
+    )
+    bodies: dict[tuple[str, str | None], float] = {}
+    for c in points:  # a body's friction: its contacts' largest
+        key = (c.body, c.model_instance)
+        bodies[key] = max(bodies.get(key, 0.0), c.friction or 0.0)
+    inspector = scene_graph.model_inspector()
+    shapes = []
+    for (name, model), mu in bodies.items():
+        body = _body(plant, name, model)
+        visuals = plant.GetVisualGeometriesForBody(body)
+        if not visuals:
+            raise ValueError(f"hydroelastic: body {name!r} has no visual shape to collide with")
+        if 0.0 < mu < mu_ground:  # combines with the ground's to the body's own (see above)
+            mu = mu * mu_ground / (2.0 * mu_ground - mu)
+        for j, g in enumerate(visuals):
+            props = _properties(mu, material)
+            AddCompliantHydroelasticProperties(hint, hydro["modulus"], props)
+            shapes.append(plant.RegisterCollisionGeometry(
+                body, inspector.GetPoseInFrame(g), inspector.GetShape(g),
+                f"hydroelastic_{name}_{j}", props,
+            ))  # fmt: skip
+    return ground, shapes

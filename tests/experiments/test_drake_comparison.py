@@ -64,7 +64,11 @@ def test_writes_every_file_with_finite_numbers(comparison):
         image = np.asarray(Image.open(out / f"{name}.png").convert("L"), dtype=float)
         assert image.std() > 10, f"{name}.png looks blank"
     md = (out / "comparison.md").read_text()
-    assert "| Drake SAP |" in md and "| ours Exact |" in md and "## Why they differ" in md
+    assert (
+        "| Drake SAP |" in md
+        and "| ours, exact (hard contact) |" in md
+        and "## Why they differ" in md
+    )
     data = json.loads((out / "comparison.json").read_text())
     assert data["scenes"].keys() == {"box", "ball"}
     for scene in ("scenes", "timings"):

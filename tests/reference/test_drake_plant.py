@@ -196,3 +196,43 @@ def test_bad_arguments_are_named(models):
         stepper.step(np.full(6, np.nan), [0.0])
     with pytest.raises(ValueError, match="names no model parameters"):
         stepper.step(np.zeros(6), [0.0], parameters=True)
+
+
+def test_hydroelastic_twin_rests_on_its_drawn_box_and_softer_sinks_deeper(models):
+    """With hydroelastic settings the box collides through its drawn 0.4 x 0.2 x 0.2 box,
+    compliant, against a rigid ground: it settles with its centre a little below 0.1 m, deeper
+    for a softer modulus; no point candidates, so the impulse has no columns."""
+    scene = models["box_push"].scene
+    rest = np.r_[0.0, 0.1, 0.0, 0.0, 0.0, 0.0]
+    sinks = []
+    for modulus in (1e6, 1e7):
+        stepper = DrakePlantStepper(scene, "sap", hydroelastic={"modulus": modulus})
+        inspector = stepper.twin.scene_graph.model_inspector()
+        names = {
+            frozenset(inspector.GetName(g).rsplit("::", 1)[-1] for g in pair)
+            for pair in inspector.GetCollisionCandidates()
+        }
+        assert names == {frozenset({"ground", "hydroelastic_box_0"})}
+        traj = open_loop(stepper, rest, np.zeros((100, 1)), jacobians=False)
+        assert traj.impulse.shape == (1, 100, 0) and stepper.nc == 0
+        assert np.abs(traj.x[0, -1, 3:]).max() < 1e-3  # at rest
+        sinks.append(0.1 - traj.x[0, -1, 1])
+    assert 0 < sinks[1] < sinks[0] < 0.01
+    copy = pickle.loads(pickle.dumps(stepper))
+    assert copy.hydroelastic == {"modulus": 1e7, "resolution_hint": 0.05, "ground_thickness": 0.1}
+    np.testing.assert_array_equal(
+        copy.step(rest, [0.0], jacobians=False).x_next,
+        stepper.step(rest, [0.0], jacobians=False).x_next,
+    )
+
+
+def test_bad_hydroelastic_settings_are_named(models):
+    scene = models["box_push"].scene
+    with pytest.raises(ValueError, match=r"hydroelastic\['modulus'\] must be a finite number"):
+        DrakePlantStepper(scene, hydroelastic={})
+    with pytest.raises(ValueError, match=r"keys among \['ground_thickness', 'modulus'"):
+        DrakePlantStepper(scene, hydroelastic={"modulus": 1e7, "stiffness": 1.0})
+    with pytest.raises(ValueError, match=r"hydroelastic\['ground_thickness'\]"):
+        DrakePlantStepper(scene, hydroelastic={"modulus": 1e7, "ground_thickness": -0.1})
+    with pytest.raises(ValueError, match="ground contacts only"):
+        DrakePlantStepper("pusher_box", hydroelastic={"modulus": 1e7})
