@@ -162,34 +162,25 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             finals.append(float(run_.theta[0]))
             bar.update()
         ev = np.array(evals)
+        final = ev[:, -1]
         curves[name] = {"eval_return": ev.tolist(), "simulated_steps": steps[0]}
         runs[name] = {
-            "final_return_mean": float(ev[:, -1].mean()),
-            "final_return_std": float(ev[:, -1].std()),
-            "final_returns": ev[:, -1].tolist(),
-            "auc_per_seed": ev.mean(axis=1).tolist(),
-            "final_angle_mean": float(np.mean(finals)),
-            "final_angle_std": float(np.std(finals)),
+            "final_return_mean": float(final.mean()), "final_return_std": float(final.std()),
+            "final_returns": final.tolist(), "auc_per_seed": ev.mean(axis=1).tolist(),
+            "final_angle_mean": float(np.mean(finals)), "final_angle_std": float(np.std(finals)),
             "iterations_to_threshold": _iterations_to(ev, threshold=-1e-2),
             "area_under_curve": float(ev.mean(axis=0).mean()),
-            "unconverged_steps": int(unconverged),
-            "seconds": seconds,
-        }
+            "unconverged_steps": int(unconverged), "seconds": seconds,
+        }  # fmt: skip
     summary = {
-        "config": asdict(config),
-        "best_angle_on_grid": float(angles[best]),
+        "config": asdict(config), "best_angle_on_grid": float(angles[best]),
         "best_return_on_grid": float(returns[best]),
-        "initial_return": float(true_return(config, config.angle0)[0][0]),
-        "methods": runs,
-        "claims": _claims(runs),
-        "seconds": time.perf_counter() - start_all,
-    }
+        "initial_return": float(true_return(config, config.angle0)[0][0]), "methods": runs,
+        "claims": _claims(runs), "seconds": time.perf_counter() - start_all,
+    }  # fmt: skip
     bar.close()
-    land = landscape(config, angles)
-    files = _plot(out, config, curves, angles, p_final, land)
-    files["curves"] = out / "curves.json"
-    files["runs"] = out / "runs"
-    files["summary"] = out / "summary.json"
+    files = _plot(out, config, curves, angles, p_final, landscape(config, angles))
+    files |= {"curves": out / "curves.json", "runs": out / "runs", "summary": out / "summary.json"}
     summary["folder"] = str(out)
     summary["files"] = file_list(files)
     (out / "curves.json").write_text(json.dumps(curves))

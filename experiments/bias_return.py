@@ -21,8 +21,8 @@ about a millisecond per sample in Python:
   parameters, zero at the start), actions in [-1, 1] with noise sigma = 0.1.
 
 Each design is trained with Adam on FOPG estimates (Zhang et al. 2023, eq. 4.1) from the same
-seeds. The
-rollouts of training use the design's own (softened) dynamics, as Algorithm 1 does. Measured:
+seeds. The rollouts of training use the design's own (softened) dynamics with the frozen
+gradient, as Algorithm 1 does. Measured:
 
 - the **return** of the current policy on the EXACT model (hard contact), with fixed evaluation
   noise (common random numbers across designs and iterations), every ``eval_every`` iterations;
@@ -211,12 +211,8 @@ def _checkpoint(
     """The design's FOPG variance and its bias against the exact reference at theta.
     ``references`` caches the exact references by (seed, k, theta): every design starts from
     the same theta, so iteration 0 shares one."""
-    stats = measure_variance(
-        lambda th, rng: first_order(obj, th, rng, size.samples),
-        theta,
-        batches=size.bias_batches,
-        seed=cp_seed,
-    )
+    stats = measure_variance(lambda th, rng: first_order(obj, th, rng, size.samples), theta,
+                             batches=size.bias_batches, seed=cp_seed)  # fmt: skip
     key = (seed, k, np.asarray(theta, dtype=float).tobytes())
     if key not in references:
         references[key] = reference_gradient(
@@ -251,8 +247,8 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int, bar=None) -> dict:
     designs, references = {}, {}
     for name, smoothing in DESIGNS.items():
         obj = task.objective(smoothing, size.horizon)
-        returns, checkpoints, unconverged, seconds, diverged, errors = [], [], 0, 0.0, {}, {}
-        dropped = 0
+        returns, checkpoints, diverged, errors = [], [], {}, {}
+        unconverged, dropped, seconds = 0, 0, 0.0
         for seed in size.seeds:
             if bar is not None:
                 bar.set_postfix_str(f"{task.name}: {name}, seed {seed}")
@@ -286,23 +282,17 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int, bar=None) -> dict:
         alive = np.isfinite(R).sum(axis=0)
         with warnings.catch_warnings():  # all-NaN columns (every seed diverged) stay NaN
             warnings.simplefilter("ignore", RuntimeWarning)
-            stats = [np.nanmean(R, 0), np.nanstd(R, 0), np.nanmin(R, 0), np.nanmax(R, 0)]
+            stats = {"mean": np.nanmean(R, 0), "std": np.nanstd(R, 0), "min": np.nanmin(R, 0),
+                     "max": np.nanmax(R, 0)}  # fmt: skip
         designs[name] = {
-            "eval_iterations": eval_iters,
-            "returns_per_seed": _json_list(R),
-            "return_mean": _json_list(stats[0]),
-            "return_std": _json_list(stats[1]),
-            "return_min": _json_list(stats[2]),
-            "return_max": _json_list(stats[3]),
-            "seeds_evaluated": alive.tolist(),
-            "diverged_at": diverged,
-            "divergence_errors": errors,
-            "checkpoints": checkpoints,
+            "eval_iterations": eval_iters, "returns_per_seed": _json_list(R),
+            **{f"return_{k}": _json_list(v) for k, v in stats.items()},
+            "seeds_evaluated": alive.tolist(), "diverged_at": diverged,
+            "divergence_errors": errors, "checkpoints": checkpoints,
             "bias_by_iteration": _bias_by_iteration(checkpoints, size.checkpoints),
             "unconverged_training_steps": int(unconverged),
-            "dropped_training_rollouts": int(dropped),
-            "training_seconds": seconds,
-        }
+            "dropped_training_rollouts": int(dropped), "training_seconds": seconds,
+        }  # fmt: skip
     return {"size": asdict(size), "designs": designs}
 
 

@@ -31,10 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
 from drake_abs.experiments._common import file_list, progress, readable, results_dir
+from drake_abs.policy import variance_growth as vg
 from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
-from drake_abs.policy.variance_growth import curve_style, mu_ordering, variance_curves
 from drake_abs.tasks import hopping_ball as ball
 
 NAME = "gradient-variance"
@@ -65,14 +64,6 @@ class Config:
                    reference_samples=256, reference_batches=8)  # fmt: skip
 
 
-def smoothings(config: Config) -> dict[str, SmoothingPolicy]:
-    out: dict[str, SmoothingPolicy] = {"exact": Exact()}
-    out.update({f"BS mu={mu:g}": Fixed(mu) for mu in config.fixed_mus})
-    out["ABS contact-aware"] = ContactAware(*config.contact_aware)
-    out["ABS Gaussian-matched"] = GaussianMatched(config.gaussian_sigma)
-    return out
-
-
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Measure the variance (and bias) sweep; write the figures and summary.json to ``out``
     (default results/gradient-variance); ``summary["files"]`` lists them (absolute paths)."""
@@ -80,7 +71,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     out = results_dir(NAME, out)
     start = time.perf_counter()
     theta = ball.spring_theta()
-    designs = smoothings(config)
+    designs = vg.sweep_smoothings(config.fixed_mus, config.contact_aware, config.gaussian_sigma)
     points = len(config.horizons) * sum(1 if p.is_constant else len(MODES)
                                         for p in designs.values())  # fmt: skip
     bar = progress(total=points, desc="gradient-variance: points")
@@ -102,13 +93,13 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         bias = {"bias": row["bias"]["bias"], "bias_noise": row["bias"]["noise"]}
         return {"largest_batch_share": row["largest_batch_share"]} | (bias if "bias" in row else {})
 
-    curves = variance_curves(rows, fit_from=config.fit_from, time_step=ball.TIME_STEP,
+    curves = vg.variance_curves(rows, fit_from=config.fit_from, time_step=ball.TIME_STEP,
                              extra=extra)  # fmt: skip
     task = {"time_step_s": ball.TIME_STEP, "spring_N_per_m": ball.SPRING, "y_eq_m": ball.Y_EQ,
             "x0": ball.X0, "y_goal_m": ball.Y_GOAL, "theta": theta.tolist()}  # fmt: skip
     summary = {
         "config": asdict(config), "task": task, "curves": curves,
-        "mu_ordering": mu_ordering(rows, config.horizons),
+        "mu_ordering": vg.mu_ordering(rows, config.horizons),
         "unconverged_steps": int(sum(r["unconverged_steps"] for r in rows)), "rows": rows,
         "seconds": time.perf_counter() - start,
     }  # fmt: skip
@@ -132,7 +123,7 @@ def _plot(curves: dict, path: Path, what: str) -> Path:
 
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for name, c in curves.items():
-        style = curve_style(name, list(curves), matplotlib.colormaps["viridis"])
+        style = vg.curve_style(name, list(curves), matplotlib.colormaps["viridis"])
         H = np.array(c["horizon"], float)
         if what == "variance":
             ax.errorbar(H, c["variance"], yerr=c["variance_se"], marker="o", ms=3, capsize=2,

@@ -231,24 +231,19 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         env_id = TASKS[name].env_id
         task = locomotion_task(name)  # the scene's own, exact contact: our plant
         mujoco = same_period_frame_skip(env_id, task.dt)
-        settings = {
-            "ours": {"control_period": task.dt, "frame_skip": None, "timestep": task.dt,
-                     "integrator": "semi-implicit Euler time stepping, hard contact"},
-            "mujoco_default": {"control_period": mujoco["default_period"],
-                               "frame_skip": mujoco["default_frame_skip"],
-                               "timestep": mujoco["timestep"], "integrator": mujoco["integrator"]},
-            "mujoco_same_dt": {"control_period": mujoco["frame_skip"] * mujoco["timestep"],
-                               "frame_skip": mujoco["frame_skip"],
-                               "timestep": mujoco["timestep"], "integrator": mujoco["integrator"]},
-        }  # fmt: skip
+        skips = {"mujoco_default": mujoco["default_frame_skip"],
+                 "mujoco_same_dt": mujoco["frame_skip"]}  # fmt: skip
+        ours = "semi-implicit Euler time stepping, hard contact"
+        settings = {"ours": {"control_period": task.dt, "frame_skip": None, "timestep": task.dt,
+                             "integrator": ours}}  # fmt: skip
+        settings |= {key: {"control_period": skip * mujoco["timestep"], "frame_skip": skip,
+                           "timestep": mujoco["timestep"], "integrator": mujoco["integrator"]}
+                     for key, skip in skips.items()}  # fmt: skip
+        # setting -> (stepper, its initial states); None: the task's own stepper (our plant)
         x_mujoco = reset_states(env_id, config.seeds)
-        # setting -> (stepper, its initial states); None: the task's own stepper
-        steppers = {
-            "ours": (None, np.array([reset_state(task, s) for s in config.seeds])),
-            "mujoco_default": (MujocoStepper.from_gymnasium(env_id), x_mujoco),
-            "mujoco_same_dt": (MujocoStepper.from_gymnasium(
-                env_id, frame_skip=mujoco["frame_skip"]), x_mujoco),
-        }  # fmt: skip
+        steppers = {"ours": (None, np.array([reset_state(task, s) for s in config.seeds]))}
+        steppers |= {key: (MujocoStepper.from_gymnasium(env_id, frame_skip=skip), x_mujoco)
+                     for key, skip in skips.items()}  # fmt: skip
         paths = saved_paths[name]
         sources = {p: "saved" for p in paths}
         if not paths:

@@ -30,11 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.smoothing import Exact
 from drake_abs.experiments._common import file_list, progress, readable, results_dir
+from drake_abs.policy import variance_growth as vg
 from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
 from drake_abs.policy.policies import LinearPolicy
-from drake_abs.policy.variance_growth import curve_style, mu_ordering, variance_curves
 
 NAME = "locomotion-variance"
 MODES = ("frozen", "total")
@@ -64,13 +64,6 @@ class Config:
         return cls(horizons=(5, 10, 20), fixed_mus=(1e-10, 1e-2), samples=8, batches=4)
 
 
-def smoothings(config: Config) -> dict[str, SmoothingPolicy]:
-    out: dict[str, SmoothingPolicy] = {"exact": Exact()}
-    out.update({f"BS mu={mu:g}": Fixed(mu) for mu in config.fixed_mus})
-    out["ABS contact-aware"] = ContactAware(*config.contact_aware)
-    return out
-
-
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Measure the variance sweep on each task; write the figure and summary.json to ``out``
     (default results/locomotion-variance); ``summary["files"]`` lists them (absolute paths)."""
@@ -81,7 +74,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         raise ValueError(f"tasks must be among {TASKS}; got {config.tasks!r}")
     out = results_dir(NAME, out)
     start = time.perf_counter()
-    designs = smoothings(config)
+    designs = vg.sweep_smoothings(config.fixed_mus, config.contact_aware)
     per_task = len(config.horizons) * sum(1 if p.is_constant else len(MODES)
                                           for p in designs.values())  # fmt: skip
     bar = progress(total=per_task * len(config.tasks), desc=f"{NAME}: points")
@@ -108,14 +101,14 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             objective, theta, designs, config.horizons, batches=config.batches,
             seed=config.seed, estimator=fopg(config.samples), modes=MODES, progress=tick,
         )  # fmt: skip
-        curves = variance_curves(
+        curves = vg.variance_curves(
             rows,
             fit_from=config.fit_from,
             time_step=dt,
             extra=lambda r: {"dropped": r.get("dropped_rollouts", 0)},
         )
         results[name] = {
-            "curves": curves, "mu_ordering": mu_ordering(rows, config.horizons),
+            "curves": curves, "mu_ordering": vg.mu_ordering(rows, config.horizons),
             "unconverged_steps": int(sum(r["unconverged_steps"] for r in rows)),
             "theta": theta.tolist(), "rows": rows,
         }  # fmt: skip
@@ -140,7 +133,7 @@ def _plot(results: dict, path: Path) -> Path:
     for ax, (name, res) in zip(axes[0], results.items(), strict=True):
         curves = res["curves"]
         for label, c in curves.items():
-            style = curve_style(label, list(curves), matplotlib.colormaps["viridis"])
+            style = vg.curve_style(label, list(curves), matplotlib.colormaps["viridis"])
             ax.errorbar(c["horizon"], c["variance"], yerr=c["variance_se"], marker="o", ms=3,
                         capsize=2, label=readable(label), **style)  # fmt: skip
         ax.set(xlabel="unroll length H (steps of 0.01 s)", yscale="log",

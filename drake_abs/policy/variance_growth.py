@@ -15,9 +15,34 @@ from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
-__all__ = ["curve_label", "curve_style", "fit_growth", "mu_ordering", "variance_curves"]
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+
+__all__ = [
+    "curve_label",
+    "curve_style",
+    "fit_growth",
+    "mu_ordering",
+    "sweep_smoothings",
+    "variance_curves",
+]
 
 BS_PREFIX = "BS mu="
+
+
+def sweep_smoothings(
+    fixed_mus: Iterable[float],
+    contact_aware: tuple[float, float],
+    gaussian_sigma: float | None = None,
+) -> dict[str, SmoothingPolicy]:
+    """The smoothings of a sweep under their curve names: ``"exact"``, ``"BS mu=<mu>"`` per
+    fixed mu (larger is smoother), ``"ABS contact-aware"`` (``contact_aware`` = (mu_max, length
+    in m)) and, with ``gaussian_sigma`` (m), ``"ABS Gaussian-matched"``."""
+    out: dict[str, SmoothingPolicy] = {"exact": Exact()}
+    out.update({f"{BS_PREFIX}{mu:g}": Fixed(mu) for mu in fixed_mus})
+    out["ABS contact-aware"] = ContactAware(*contact_aware)
+    if gaussian_sigma is not None:
+        out["ABS Gaussian-matched"] = GaussianMatched(gaussian_sigma)
+    return out
 
 
 def curve_label(row: dict) -> str:

@@ -12,6 +12,7 @@ from drake_abs.policy.variance_growth import (
     curve_style,
     fit_growth,
     mu_ordering,
+    sweep_smoothings,
     variance_curves,
 )
 
@@ -70,3 +71,15 @@ def test_curve_styles():
         "color": "tab:red",
         "linestyle": "--",
     }
+
+
+def test_sweep_smoothings_are_named_as_the_curves():
+    from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched
+
+    designs = sweep_smoothings((1e-10, 0.01), (1e-2, 0.05), gaussian_sigma=0.02)
+    assert list(designs) == ["exact", "BS mu=1e-10", "BS mu=0.01", "ABS contact-aware",
+                             "ABS Gaussian-matched"]  # fmt: skip
+    assert designs["exact"] == Exact() and designs["BS mu=0.01"] == Fixed(0.01)
+    assert designs["ABS contact-aware"] == ContactAware(1e-2, 0.05)
+    assert designs["ABS Gaussian-matched"] == GaussianMatched(0.02)
+    assert "ABS Gaussian-matched" not in sweep_smoothings((), (1e-2, 0.05))
