@@ -111,16 +111,16 @@ def noisy_feedback(task, inner, theta, sigma: float, effort: np.ndarray, seeds, 
 
 def mujoco_episodes(source, task, episodes: int, steps: int, seed: int, controls):
     """``episodes`` MuJoCo episodes (``source``) of at most ``steps`` steps as transitions:
-    episode e from gymnasium's reset of the seed ``episode_seed(seed, e)`` (the task's reset
-    noise), under ``controls(seeds)``: inputs (episodes, steps, nu) or a time-varying policy,
-    ending where the task terminates (the Hopper falls)."""
+    episode e from gymnasium's reset of the seed ``episode_seed(seed, e)``, under
+    ``controls(seeds)``: inputs (episodes, steps, nu) or a time-varying policy, ending where the
+    task terminates (the Hopper falls)."""
     from drake_abs.engine import open_loop, rollout
     from drake_abs.learning.transitions import Transitions
     from drake_abs.policy.controls import episode_seed
+    from drake_abs.reference.gymnasium_mujoco import reset_states
 
     seeds = [episode_seed(seed, e) for e in range(episodes)]
-    x0 = np.array([task.reset_noise.sample(np.random.default_rng(s), task.x0, task.nq, 1)[0]
-                   for s in seeds])  # fmt: skip
+    x0 = reset_states(task.env_id, seeds)
     made = controls(seeds)
     if isinstance(made, np.ndarray):
         run = open_loop(source.stepper, x0, made, jacobians=False)
@@ -140,32 +140,19 @@ def with_model(task, names, theta):
     return replace(task, stepper=ActionScaled(inner, task.stepper.scale))
 
 
-def _locomotion_config(config: Config):
-    from drake_abs.experiments.locomotion import Config as LocomotionConfig
-
-    return LocomotionConfig(
-        tasks=(config.task,), methods=("fopg_abs",), seeds=(config.seed,),
-        iterations=config.policy_iterations, rollouts=config.rollouts, horizon=config.horizon,
-        sigma=config.sigma, learning_rate=config.learning_rate,
-        contact_aware=config.contact_aware, eval_episodes=1, eval_horizon=1,
-    )  # fmt: skip
-
-
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    from drake_abs.experiments.locomotion import train_method
-    from drake_abs.experiments.locomotion_transfer import (
-        evaluate_gymnasium,
-        make_gymnasium,
-        same_period_frame_skip,
-        statistics,
-    )
     from drake_abs.learning.scene_fits import fit_parameters, learned_names, perturbed_start
     from drake_abs.multibody import build_scene_model
     from drake_abs.policy.controls import uniform_inputs
     from drake_abs.policy.policies import LinearPolicy
     from drake_abs.policy.saving import save_policy
+    from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
+    from drake_abs.reference.mujoco_plant import MujocoStepper
     from drake_abs.reference.scene_sources import mujoco_source
+    from drake_abs.tasks.episodes import episode_statistics, score_episodes
     from drake_abs.tasks.locomotion import TASKS, locomotion_task
+    from drake_abs.tasks.locomotion_training import LocomotionTraining, train_method
+    from drake_abs.tasks.locomotion_training import evaluate as our_return
 
     config = Config() if config is None else config
     config.check()
@@ -185,16 +172,18 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     )  # fmt: skip
 
     frame = same_period_frame_skip(env_id, base.dt)
-    env = make_gymnasium(env_id, config.eval_steps, frame["frame_skip"])
+    mujoco = MujocoStepper.from_gymnasium(env_id, frame_skip=frame["frame_skip"])
     inner = LinearPolicy(base.n_obs, base.nu)
     eval_seeds = [10_000 + i for i in range(config.eval_episodes)]
+    x_mujoco = reset_states(env_id, eval_seeds)
+    # our plant (exact contact, the file's parameters) from gymnasium's reset noise
+    x_ours = true_task.initial_states(np.random.default_rng([config.seed, 3]), config.eval_episodes)
 
     def evaluate(theta_pi) -> dict:
-        def actor(obs, state):
-            return inner.act(theta_pi, np.asarray(obs, float)[None])[0]
-
-        mujoco_stats = statistics(evaluate_gymnasium(env, actor, eval_seeds, config.eval_steps))
-        ours = ml_evaluate(true_task, theta_pi, config)
+        mujoco_stats = episode_statistics(score_episodes(
+            true_task, true_task.policy(inner), theta_pi, x_mujoco, config.eval_steps,
+            stepper=mujoco))  # fmt: skip
+        ours = our_return(true_task, theta_pi, x_ours, config.eval_steps)
         return {"mujoco_return": mujoco_stats["return_mean"],
                 "mujoco_return_std": mujoco_stats["return_std"],
                 "mujoco_length": mujoco_stats["length_mean"], "our_return": ours}  # fmt: skip
@@ -208,7 +197,11 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
 
     data = mujoco_episodes(source, base, config.initial_episodes, config.steps, config.seed,
                            random_inputs)  # fmt: skip
-    loc = _locomotion_config(config)
+    loc = LocomotionTraining(
+        iterations=config.policy_iterations, rollouts=config.rollouts, horizon=config.horizon,
+        sigma=config.sigma, learning_rate=config.learning_rate,
+        contact_aware=config.contact_aware, eval_horizon=1,
+    )  # fmt: skip
     x_eval = base.initial_states(np.random.default_rng([config.seed, 2]), 1)
     tasks = {"file": base, "start": with_model(base, names, theta_start)}
     theta_pi = {arm: np.zeros(inner.n_params) for arm in ARMS}
@@ -251,7 +244,6 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         for arm in ARMS:
             rows.append({"round": k, "arm": arm, "transitions": int(data.x.shape[0]),
                          "train_seconds": seconds[arm], **evaluate(theta_pi[arm])})  # fmt: skip
-    env.close()
     policies = folder / "policies"
     policies.mkdir(exist_ok=True)
     saved = {}
@@ -271,15 +263,6 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     (folder / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     summary["files"]["summary"] = str(folder / "summary.json")
     return summary
-
-
-def ml_evaluate(task, theta_pi, config: Config) -> float:
-    """The deterministic return on our plant (exact contact, the file's parameters) from
-    gymnasium's reset states, over ``eval_steps`` steps."""
-    from drake_abs.experiments.locomotion import evaluate
-
-    x0s = task.initial_states(np.random.default_rng([config.seed, 3]), config.eval_episodes)
-    return evaluate(task, theta_pi, x0s, config.eval_steps)
 
 
 def _write_rounds(path: Path, rows: list[dict]) -> Path:
