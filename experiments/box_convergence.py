@@ -107,29 +107,26 @@ def box_scene(folder: Path, friction: float, mass: float, ratio: float, h: float
 
 
 def run_case(scene: Scene, steps: int, push: float) -> dict:
-    """Step one scene; per-step convergence and iterations."""
+    """Step one scene (the engine's open loop, Jacobians on); per-step convergence and
+    iterations."""
+    from drake_abs.engine import open_loop
+    from drake_abs.engine.step_log import StepLog
     from drake_abs.multibody import build_scene_model
 
     sm = build_scene_model(scene)
-    stepper = sm.stepper()
-    x = sm.x0[None]
-    u = np.array([[push]])
-    converged, iterations = [], []
+    log = StepLog(sm.stepper(), ("iterations", "dx_dx"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)
-        for _ in range(steps):
-            r = stepper.step(x, u, jacobians=True)
-            converged.append(bool(r.converged[0]))
-            iterations.append(int(r.iterations[0]))
-            if not np.all(np.isfinite(r.x_next)) or not np.all(np.isfinite(r.dx_dx)):
-                raise AssertionError("non-finite state or Jacobian returned")
-            x = r.x_next
+        traj = open_loop(log, sm.x0, np.full((steps, 1), push), on_unconverged="flag")
+    if not (np.isfinite(traj.x).all() and np.isfinite(log.stacked("dx_dx")).all()):
+        raise AssertionError("non-finite state or Jacobian returned")
+    iterations = log.stacked("iterations")[0]
     return {
-        "converged_steps": int(np.sum(converged)),
+        "converged_steps": int(traj.converged.sum()),
         "steps": steps,
         "median_iterations": float(np.median(iterations)),
         "max_iterations": int(np.max(iterations)),
-        "contact_steps": int(np.sum(np.array(iterations) > 0)),
+        "contact_steps": int(np.sum(iterations > 0)),
     }
 
 

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.engine import rollout
 from drake_abs.experiments._common import file_list, progress, results_dir
 from drake_abs.mpc.graybox import (
     ClosedLoopResult,
@@ -48,6 +49,7 @@ from drake_abs.mpc.graybox import (
 )
 from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
 from drake_abs.mpc.sysid import LinearModel, identify_linear_model
+from drake_abs.policy.controls import TimeVaryingController
 from drake_abs.tasks import quadcopter as qc
 
 NAME = "mpc-quadcopter"
@@ -159,22 +161,27 @@ def identify(config: Config, rng: np.random.Generator) -> tuple[LinearModel, dic
     P, _ = riccati_terminal_cost(A_h, B_h, Q, R)
     spec = MpcSpec(A_h, B_h, config.horizon, x_ref, u_ref, u_min, u_max, x_min, x_max)
     stabilising = QpMpc(spec, theta_from_cost(STAGE_Q, STAGE_R, P))
-    X, U, Xn = [], [], []
-    fallbacks = 0
+    # one engine rollout per trajectory (the MPC's warm start runs through them in order): the
+    # stabilising MPC plus seeded input noise, clipped to the rotor limits
+    fallbacks, runs = [], []
     spread = np.asarray(config.sysid_spread)
+    L = config.sysid_length
     for _ in range(config.sysid_trajectories):
-        x = x_ref + spread * rng.uniform(-1.0, 1.0, 12)
-        for _ in range(config.sysid_length):
-            sol = stabilising.solve(x)
-            fallbacks += int(sol.fallback)
-            noise = rng.normal(0.0, config.sysid_input_noise, 4)
-            u = np.clip(sol.u0 + noise, u_min, u_max)
-            x_next = qc.step(x, u, prm).x_next
-            X.append(x)
-            U.append(u)
-            Xn.append(x_next)
-            x = x_next
-    model = identify_linear_model(np.array(X), np.array(U), np.array(Xn), x_ref, u_ref)
+        x0 = x_ref + spread * rng.uniform(-1.0, 1.0, 12)
+        noise = rng.normal(0.0, config.sysid_input_noise, (L, 4))
+
+        def control(t, x, noise=noise):
+            sol = stabilising.solve(x[0])
+            fallbacks.append(sol.fallback)
+            return np.clip(sol.u0 + noise[t], u_min, u_max)
+
+        policy = TimeVaryingController(control, 12, 4)
+        runs.append(rollout(qc.QuadcopterStepper(prm), policy, np.zeros(0), x0,
+                            np.zeros((1, L, 4)), sigma=0.0, gradient=False))  # fmt: skip
+    X = np.concatenate([r.x[0, :-1] for r in runs])
+    Xn = np.concatenate([r.x[0, 1:] for r in runs])
+    U = np.concatenate([r.u[0] for r in runs])
+    model = identify_linear_model(X, U, Xn, x_ref, u_ref)
     info = {
         "transitions": model.samples,
         "rank": model.rank,
@@ -182,7 +189,7 @@ def identify(config: Config, rng: np.random.Generator) -> tuple[LinearModel, dic
         "max_abs_A_minus_hover_jacobian": float(np.abs(model.A - A_h).max()),
         "max_abs_B_minus_hover_jacobian": float(np.abs(model.B - B_h).max()),
         "max_abs_B_hover": float(np.abs(B_h).max()),
-        "stabilising_mpc_fallback_steps": fallbacks,
+        "stabilising_mpc_fallback_steps": int(np.sum(fallbacks)),
     }
     return model, info
 
