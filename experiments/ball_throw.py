@@ -32,7 +32,7 @@ import numpy as np
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import SmoothingPolicy
 from drake_abs.engine import rollout
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.policy.methods import method

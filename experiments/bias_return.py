@@ -50,7 +50,7 @@ import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
-from drake_abs.experiments._common import file_list, progress, readable, results_dir
+from drake_abs.experiments.outputs import file_list, progress, readable, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective, first_order
 from drake_abs.policy.gradient_stats import measure_bias, measure_variance, reference_gradient

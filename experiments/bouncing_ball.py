@@ -36,7 +36,7 @@ from drake_abs import (  # noqa: E402
     point_mass_lcs,
     solve_lcp,
 )
-from drake_abs.experiments._common import file_list, results_dir  # noqa: E402
+from drake_abs.experiments.outputs import file_list, results_dir  # noqa: E402
 
 NAME = "bouncing-ball"
 

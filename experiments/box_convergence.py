@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody.scene import Scene
 

@@ -20,61 +20,15 @@ Names are shown with dashes (gradient-variance, box-push); underscores are accep
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import sys
 from pathlib import Path
 
-# Experiment name -> module of drake_abs.experiments. Each module has ``Config`` (with a
-# ``test_size()`` constructor), ``run(config=None, out=None) -> dict`` and
-# ``report(summary) -> str``. The demo is the bouncing ball with its own options.
-STANDARD_EXPERIMENTS: dict[str, str] = {
-    "bouncing-ball": "bouncing_ball",
-    "drake-comparison": "drake_comparison",
-    "box-convergence": "box_convergence",
-    "mpc-quadcopter": "mpc_quadcopter",
-    "gradient-variance": "gradient_variance",
-    "locomotion-variance": "locomotion_variance",
-    "locomotion": "locomotion",
-    "bias-return": "bias_return",
-    "ball-throw": "ball_throw",
-    "smoothing-vs-rs": "smoothing_vs_rs",
-    "speed-accuracy": "speed_accuracy",
-    "mujoco-comparison": "mujoco_comparison",
-    "scene-recordings": "scene_recordings",
-    "locomotion-transfer": "locomotion_transfer",
-    "implicit-learning": "implicit_learning",
-    "model-learning": "model_learning",
-    "model-based-fopg": "model_based_fopg",
-}
-EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
-
-#: Experiment name -> one plain line for ``drake-abs list`` and the help.
-DESCRIPTIONS: dict[str, str] = {
-    "bouncing-ball": "the bouncing ball: exact contact, BS and ABS (Zhang et al. 2023, Fig. 2)",
-    "drake-comparison": "a pushed box and a dropped ball, ours beside Drake's SAP, Similar, Lagged",
-    "box-convergence": "convergence of the frictional contact solver over a grid of box settings",
-    "mpc-quadcopter": "gray-box tuning of a quadcopter MPC (Zuliani et al. 2025, Figs. 1 and 2)",
-    "gradient-variance": "policy-gradient variance against horizon (Zhang et al. 2023, Fig. 3)",
-    "locomotion-variance": "FOPG variance against unroll length, gymnasium's hopper, half-cheetah "
-    "(Fig. 3)",
-    "locomotion": "learning hopper and half-cheetah: FOPG-ABS against ARS, PIPPS, AoBG, MBPO, ... "
-    "(Fig. 4)",
-    "bias-return": "training with BS and ABS: return and gradient bias (Zhang et al. 2023, Fig. 5)",
-    "ball-throw": "learning a throw with ZOPG, FOPG, FOPG-BS, FOPG-ABS (Zhang et al. 2023, 8.3)",
-    "smoothing-vs-rs": "barrier against randomised smoothing (Zhang et al. 2023, Fig. 6)",
-    "speed-accuracy": "cost against accuracy of every setting, ours and Drake's",
-    "mujoco-comparison": "gymnasium's Hopper and HalfCheetah beside MuJoCo and Drake SAP",
-    "scene-recordings": "robots and a pushed box recorded as Meshcat HTML pages",
-    "locomotion-transfer": "policies trained on our plant run in gymnasium's MuJoCo Hopper and "
-    "HalfCheetah",
-    "implicit-learning": "learning a ground height: explicit, naive and violation implicit losses "
-    "(Bianchini et al. 2022, Table 1, Figs. 1 and 3)",
-    "model-learning": "our model's parameters learned from SAP and MuJoCo data, against a neural "
-    "network: prediction error vs horizon and data size",
-    "model-based-fopg": "Algorithm 2 in closed loop: model learned from MuJoCo's Hopper, FOPG-ABS "
-    "in it, evaluated in MuJoCo",
-}
+from drake_abs.experiments.catalog import (
+    DESCRIPTIONS,
+    EXPERIMENTS,
+    experiment_module,
+)
 
 
 def display_name(name: str) -> str:
@@ -186,8 +140,8 @@ def _print_report(report: str, folder: Path) -> None:
 
 
 def _run_demo(out: Path, *, duration: float | None, meshcat: bool) -> int:
-    from drake_abs.experiments._common import results_dir
     from drake_abs.experiments.bouncing_ball import Config, report, run
+    from drake_abs.experiments.outputs import results_dir
 
     kwargs = {"meshcat": meshcat}
     if duration is not None:
@@ -201,9 +155,9 @@ def _run_standard(name: str, out: Path | None, *, test_size: bool, ray: bool = F
                   address: str | None = None, workers: int | None = None) -> int:  # fmt: skip
     """Run one experiment; with ``ray`` its estimators' rollouts go to a
     :class:`~drake_abs.parallel.RayRunner` (the same numbers, see drake_abs.parallel)."""
-    from drake_abs.experiments._common import default_out
+    from drake_abs.experiments.outputs import default_out
 
-    module = importlib.import_module(f"drake_abs.experiments.{STANDARD_EXPERIMENTS[name]}")
+    module = experiment_module(name)
     config = module.Config.test_size() if test_size else module.Config()
     folder = default_out(name) if out is None else out.expanduser().resolve()
     if not ray:
@@ -517,7 +471,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "no_progress", False):
-        from drake_abs.experiments._common import set_progress
+        from drake_abs.experiments.outputs import set_progress
 
         set_progress(False)
     if args.command == "list" or (args.command == "experiment" and args.list):

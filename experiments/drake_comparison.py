@@ -32,7 +32,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from drake_abs.experiments._common import file_list, progress, results_dir  # noqa: E402
+from drake_abs.experiments.outputs import file_list, progress, results_dir  # noqa: E402
 from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy  # noqa: E402
 from drake_abs.reference import comparison_scenes as cs  # noqa: E402
 from drake_abs.reference.drake_twin import APPROXIMATION_LABELS  # noqa: E402

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments._common import file_list, progress, readable, results_dir
+from drake_abs.experiments.outputs import file_list, progress, readable, results_dir
 from drake_abs.policy import variance_growth as vg
 from drake_abs.policy.gradient_stats import fopg, variance_bias_sweep
 from drake_abs.tasks import hopping_ball as ball

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.learning.generalization import (
     PAPER_TABLE_1,
     generalization_bound,

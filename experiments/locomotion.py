@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.policy.mbpo import MbpoConfig
 from drake_abs.policy.methods import method, smoothing_policy
 from drake_abs.policy.policies import LinearPolicy

@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 
 NAME = "locomotion-transfer"
 TASK_NAMES = ("hopper", "half_cheetah")

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.learning.scene_losses import learned_values, stepper_at
 
 NAME = "model-based-fopg"

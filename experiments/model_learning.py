@@ -50,7 +50,7 @@ import numpy as np
 
 from drake_abs.contact.step import Step
 from drake_abs.engine import open_loop
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.learning.scene_fits import FITS, fit_parameters, learned_names, perturbed_start
 from drake_abs.learning.scene_losses import learned_values, stepper_at
 from drake_abs.learning.transitions import Transitions

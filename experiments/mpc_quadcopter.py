@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.engine import rollout
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.mpc.graybox import (
     ClosedLoopResult,
     GrayBoxResult,

@@ -31,7 +31,7 @@ import numpy as np
 
 from drake_abs.engine import open_loop
 from drake_abs.engine.step_log import StepLog
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.multibody import build_scene_model
 from drake_abs.policy.controls import held_random_inputs
 from drake_abs.reference.drake_plant import DrakePlantStepper

@@ -33,7 +33,7 @@ import numpy as np
 
 from drake_abs import engine
 from drake_abs.diagrams.scene_visualization import record_rollout_html
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.multibody import build_scene_model
 from drake_abs.multibody.posture import SOLO12_TROT, STANDING_GAINS, stepping_controller
 from drake_abs.policy.controls import TimeVaryingController, held_random_inputs

@@ -43,7 +43,7 @@ from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import Fixed
 from drake_abs.contact.unconverged import UnconvergedStepWarning
 from drake_abs.engine import open_loop
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.tasks.box_lcs import TranslatingBox
 from drake_abs.tasks.point_mass import point_mass_lcs

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.unconverged import UnconvergedStepError
-from drake_abs.experiments._common import file_list, progress, results_dir
+from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
 from drake_abs.reference.comparison_scenes import SCENES, ComparisonScenes
 from drake_abs.reference.drake_twin import APPROXIMATION_LABELS

@@ -3,7 +3,7 @@
 
 - :class:`ExperimentPoint` is the function of a point: it builds the experiment's ``Config``
   (``Config.test_size()`` or ``Config()``), applies the point's values as overrides (checked
-  against the fields' types, :mod:`drake_abs.experiments._overrides`), runs the experiment into
+  against the fields' types, :mod:`drake_abs.parallel.overrides`), runs the experiment into
   the point's folder and returns its summary. It is picklable (a frozen dataclass holding the
   experiment's name), so Ray workers import the experiment themselves.
 - :func:`build_grid` turns ``--seeds 0 1`` and ``--set KEY=V1,V2`` into the points: every
@@ -15,15 +15,14 @@
 
 from __future__ import annotations
 
-import importlib
 import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
-from drake_abs.experiments._overrides import apply_overrides, coerce_field, field_names, field_spec
+from drake_abs.experiments.catalog import experiment_module
+from drake_abs.parallel.overrides import apply_overrides, coerce_field, field_names, field_spec
 from drake_abs.parallel.sweep import SweepResult
 from drake_abs.parallel.sweep_points import label
 
@@ -35,17 +34,6 @@ class GridError(ValueError):
     def __init__(self, argument: str, message: str):
         super().__init__(message)
         self.argument = argument
-
-
-def experiment_module(name: str) -> ModuleType:
-    """The module of experiment ``name`` (dashed, as ``drake-abs list`` shows it)."""
-    from drake_abs.experiments.cli import STANDARD_EXPERIMENTS
-
-    if name not in STANDARD_EXPERIMENTS:
-        raise ValueError(
-            f"experiment must be one of {', '.join(STANDARD_EXPERIMENTS)}; got {name!r}"
-        )
-    return importlib.import_module(f"drake_abs.experiments.{STANDARD_EXPERIMENTS[name]}")
 
 
 @dataclass(frozen=True)
@@ -72,16 +60,16 @@ class ExperimentPoint:
         return apply_overrides(self.base_config(), values)
 
     def __call__(self, values: dict, folder: Path) -> dict:
-        from drake_abs.experiments import _common
+        from drake_abs.experiments import outputs
 
         module = experiment_module(self.experiment)
         config = self.config(values)
-        previous = _common.progress_enabled()
-        _common.set_progress(False)
+        previous = outputs.progress_enabled()
+        outputs.set_progress(False)
         try:
             return module.run(config, out=folder)
         finally:
-            _common.set_progress(previous)
+            outputs.set_progress(previous)
 
     def describe(self) -> dict:
         """What sweep.json and every point.json record as the sweep's function."""

@@ -50,7 +50,7 @@ _LAPACK_FROM = 32
 
 
 @nb.njit(cache=True, inline="always")
-def _invert(K, out, aug):
+def gauss_jordan_inverse(K, out, aug):
     """out = K^-1 by Gauss-Jordan with partial pivoting; False when singular."""
     d = K.shape[0]
     for i in range(d):
@@ -305,7 +305,7 @@ def iterate(Fs, shared, qs, mu_s, gap_scale, lam, s, tol, max_iterations, monoto
                     inverted = False
             elif d <= _GAUSS_JORDAN_TO:  # tiny: the explicit inverse is cheapest
                 factored = False
-                inverted = _invert(K, Kinv, aug)
+                inverted = gauss_jordan_inverse(K, Kinv, aug)
             else:
                 factored = _lu_factor(K, LU, piv)
                 inverted = factored

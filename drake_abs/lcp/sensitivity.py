@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from drake_abs.lcp.ipm_kernel import _invert
+from drake_abs.lcp.ipm_kernel import gauss_jordan_inverse
 
 
 def batched_inverse(M: np.ndarray) -> np.ndarray:
@@ -106,7 +106,7 @@ def _equilibrated_inverse_small(F3, shared, lam, slack):
             for j in range(d):
                 K[i, j] = lam[b, i] * w[b, i] * F[i, j]
             K[i, i] += slack[b, i] * w[b, i]
-        ok[b] = _invert(K, out[b], aug)
+        ok[b] = gauss_jordan_inverse(K, out[b], aug)
     return out, w, ok
 
 

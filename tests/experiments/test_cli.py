@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from drake_abs.experiments import _common, cli
-from drake_abs.experiments.cli import EXPERIMENTS, STANDARD_EXPERIMENTS, build_parser, main
+from drake_abs.experiments import cli, outputs
+from drake_abs.experiments.catalog import EXPERIMENTS, STANDARD_EXPERIMENTS
+from drake_abs.experiments.cli import build_parser, main
 from drake_abs.multibody.scene import shipped_scenes
 
 MARKUP = ("`", "**", ":func:", ":class:", ":mod:", ":data:", ":meth:")
@@ -44,7 +45,7 @@ def test_every_experiment_has_the_same_entry_point():
 def test_default_results_folder_is_the_same_everywhere(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     for name in EXPERIMENTS:
-        assert _common.default_out(name) == (tmp_path / "results" / name).resolve()
+        assert outputs.default_out(name) == (tmp_path / "results" / name).resolve()
     from drake_abs.experiments.bouncing_ball import Config, run
 
     summary = run(Config(duration=0.1, meshcat=False))  # out=None
@@ -58,13 +59,13 @@ def test_default_results_folder_is_the_same_everywhere(tmp_path, monkeypatch):
 
 
 def test_progress_bars_can_be_turned_off(monkeypatch):
-    monkeypatch.setattr(_common, "_progress_enabled", True)  # restored afterwards
-    with _common.progress(total=3) as bar:
+    monkeypatch.setattr(outputs, "_progress_enabled", True)  # restored afterwards
+    with outputs.progress(total=3) as bar:
         assert not bar.disable
-    _common.set_progress(False)
-    with _common.progress(total=3) as bar:
+    outputs.set_progress(False)
+    with outputs.progress(total=3) as bar:
         assert bar.disable
-    assert not _common.progress_enabled()
+    assert not outputs.progress_enabled()
 
 
 # ------------------------------------------------------------------------------------ --version
@@ -187,7 +188,7 @@ def test_list_shows_experiments_and_scenes(capsys):
 
 def test_cli_runs_an_experiment_and_prints_the_absolute_folder(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(_common, "_progress_enabled", True)  # restored afterwards
+    monkeypatch.setattr(outputs, "_progress_enabled", True)  # restored afterwards
     assert (
         main(["experiment", "bouncing_ball", "--test-size", "--out", "rel", "--no-progress"]) == 0
     )
@@ -196,4 +197,4 @@ def test_cli_runs_an_experiment_and_prints_the_absolute_folder(tmp_path, monkeyp
     assert out.strip().endswith(f"results written to {folder}")
     summary = json.loads((folder / "summary.json").read_text())
     assert all(Path(p).is_absolute() for p in summary["files"].values())
-    assert not _common.progress_enabled()  # --no-progress
+    assert not outputs.progress_enabled()  # --no-progress

@@ -11,7 +11,7 @@ import math
 import pytest
 
 from drake_abs.experiments import bias_return, gradient_variance
-from drake_abs.experiments.cli import STANDARD_EXPERIMENTS
+from drake_abs.experiments.catalog import STANDARD_EXPERIMENTS
 
 
 def test_gradient_variance_test_size_runs_and_writes_files(tmp_path):
