@@ -1,5 +1,6 @@
 """What every experiment shares: its results folder, its list of written files (absolute paths),
-progress bars, and readable names for smoothing policies in plots.
+progress bars, readable names for smoothing policies in plots, and the writers of its figures,
+tables, CSV and JSON files.
 
 Every experiment's entry point is ``run(config: Config | None = None, out: str | Path | None =
 None) -> dict``; ``out=None`` means :func:`default_out` of the experiment's name, that is
@@ -12,9 +13,11 @@ number.
 
 from __future__ import annotations
 
+import csv
+import json
 import os
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 #: The folder (relative to the current directory) that holds every experiment's default output.
@@ -93,3 +96,63 @@ def readable(name: str) -> str:
             break
     text = text.replace(" (frozen)", ", frozen-mu gradient").replace(" (total)", ", total gradient")
     return text
+
+
+# ------------------------------------------------------------------------------------------------
+# Figures, tables and files the experiments write (matplotlib on the Agg backend: files only)
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (no window; figures are written to files)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
+    """Lay ``fig`` out tightly, write it to ``path`` at ``dpi`` dots per inch, close it; returns
+    the path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return Path(path)
+
+
+def write_csv(path: str | Path, rows: Iterable, header: Sequence[str] | None = None) -> Path:
+    """Write ``rows`` to the CSV file ``path``; returns the path. Rows are dicts (the columns:
+    ``header``, or the first row's keys) or sequences under ``header``."""
+    rows = list(rows)
+    if header is None:
+        if not rows or not isinstance(rows[0], Mapping):
+            raise ValueError("header must be given unless rows are dicts (at least one)")
+        header = list(rows[0])
+    with Path(path).open("w", newline="") as f:
+        if rows and isinstance(rows[0], Mapping):
+            writer = csv.DictWriter(f, fieldnames=list(header))
+            writer.writeheader()
+        else:
+            writer = csv.writer(f)
+            writer.writerow(header)
+        writer.writerows(rows)
+    return Path(path)
+
+
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence]) -> list[str]:
+    """The lines of a markdown table: ``header``, then one line per row (cells as ``str``)."""
+    lines = ["| " + " | ".join(map(str, header)) + " |", "|" + " --- |" * len(header)]
+    return lines + ["| " + " | ".join(map(str, row)) + " |" for row in rows]
+
+
+def write_json(path: str | Path, data, indent: int = 2, finite: bool = False) -> Path:
+    """Write ``data`` as JSON to ``path`` (numpy scalars as floats); ``finite``: NaN and inf as
+    null. Returns the path."""
+    text = json.dumps(data, indent=indent, default=float)
+    if finite:
+        text = json.dumps(json.loads(text, parse_constant=lambda _: None), indent=indent)
+    Path(path).write_text(text)
+    return Path(path)
