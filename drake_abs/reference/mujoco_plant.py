@@ -232,25 +232,36 @@ class MujocoStepper:
         return rows
 
     def _contact_impulses(self, data) -> np.ndarray:
-        """(ngeom,) normal impulse (N s) on each geom over the MuJoCo step just taken."""
+        """(ngeom,) normal impulse (N s) on each geom over the MuJoCo step just taken: each
+        contact's normal force as ``mj_contactForce`` decodes it (a pyramidal cone's normal
+        force is the sum of its edge forces; an elliptic cone's is its first row), times the
+        timestep."""
         import mujoco
 
         out = np.zeros(self.model.ngeom)
-        force = np.zeros(6)
-        for i in range(data.ncon):
-            contact = data.contact[i]
-            mujoco.mj_contactForce(self.model, data, i, force)
-            out[[contact.geom1, contact.geom2]] += force[0] * self.model.opt.timestep
+        n = data.ncon
+        if n == 0:
+            return out
+        contact = data.contact
+        adr, dim = np.asarray(contact.efc_address), np.asarray(contact.dim)
+        force = np.asarray(data.efc_force)
+        pyramidal = self.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+        rows = np.where(pyramidal & (dim > 1), 2 * (dim - 1), 1)
+        normal = np.array([force[a : a + r].sum() if a >= 0 else 0.0 for a, r in zip(adr, rows)])
+        geoms = np.asarray(contact.geom)
+        np.add.at(out, geoms[:, 0], normal * self.model.opt.timestep)
+        np.add.at(out, geoms[:, 1], normal * self.model.opt.timestep)
         return out
 
     def _limit_impulses(self, data) -> np.ndarray:
         """(njnt,) each joint's limit impulse magnitude over the MuJoCo step just taken."""
         import mujoco
 
-        out = np.zeros(self.model.njnt)
-        rows = data.efc_type == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT
-        np.add.at(out, data.efc_id[rows], np.abs(data.efc_force[rows]) * self.model.opt.timestep)
-        return out
+        limits = np.asarray(data.efc_type) == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT
+        if not limits.any():
+            return np.zeros(self.model.njnt)
+        force = np.abs(np.asarray(data.efc_force)[limits]) * self.model.opt.timestep
+        return np.bincount(np.asarray(data.efc_id)[limits], force, minlength=self.model.njnt)
 
     def _check_differentiable(self) -> None:
         import mujoco

@@ -171,3 +171,29 @@ def test_bad_arguments_are_named(tmp_path):
         stepper.step(np.zeros(12), np.zeros(4))
     with pytest.raises(ValueError, match="names no model parameters"):
         stepper.step(np.zeros(12), np.zeros(3), parameters=True)
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_geom_impulses_are_mujocos_contact_forces(cone):
+    """The step's geom impulses against mj_contactForce, contact by contact, for both cones."""
+    stepper = MujocoStepper.from_gymnasium("HalfCheetah-v5", options={"cone": cone})
+    model = stepper.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    ctrl = np.random.default_rng(6).uniform(-1, 1, (30, model.nu))
+    force, total = np.zeros(6), 0.0
+    for c in ctrl:
+        x = stepper.state(data)
+        data.ctrl[:] = c
+        expected = np.zeros(model.ngeom)
+        for _ in range(stepper.frame_skip):
+            mujoco.mj_step(model, data)
+            for i in range(data.ncon):
+                mujoco.mj_contactForce(model, data, i, force)
+                con = data.contact[i]
+                expected[[con.geom1, con.geom2]] += force[0] * model.opt.timestep
+        step = stepper.step(x, c, jacobians=False)
+        np.testing.assert_array_equal(step.x_next, stepper.state(data))
+        np.testing.assert_allclose(step.impulse, expected, rtol=1e-12, atol=1e-15)
+        total += expected.sum()
+    assert total > 0
