@@ -247,7 +247,9 @@ class MujocoStepper:
         force = np.asarray(data.efc_force)
         pyramidal = self.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
         rows = np.where(pyramidal & (dim > 1), 2 * (dim - 1), 1)
-        normal = np.array([force[a : a + r].sum() if a >= 0 else 0.0 for a, r in zip(adr, rows)])
+        normal = np.array(
+            [force[a : a + r].sum() if a >= 0 else 0.0 for a, r in zip(adr, rows, strict=True)]
+        )
         geoms = np.asarray(contact.geom)
         np.add.at(out, geoms[:, 0], normal * self.model.opt.timestep)
         np.add.at(out, geoms[:, 1], normal * self.model.opt.timestep)
