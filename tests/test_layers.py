@@ -83,6 +83,26 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         },
         {"pydrake", "meshcat", "matplotlib"},
     ),  # fmt: skip
+    # the top: every layer below, and the libraries the experiments drive (no experiment
+    # imports another: tests/test_import_graph.py)
+    "experiments": (
+        "drake_abs.experiments",
+        {
+            "drake_abs.lcp",
+            "drake_abs.contact",
+            "drake_abs.engine",
+            "drake_abs.policy",
+            "drake_abs.tasks",
+            "drake_abs.learning",
+            "drake_abs.mpc",
+            "drake_abs.parallel",
+            "drake_abs.multibody",
+            "drake_abs.reference",
+            "drake_abs.systems",
+            "drake_abs.diagrams",
+        },
+        {"pydrake", "meshcat", "matplotlib", "tqdm", "yaml", "ray", "mujoco", "gymnasium"},
+    ),  # fmt: skip
 }
 # Every layer may use these.
 COMMON = {"numpy", "scipy", "numba", "drake_abs._validation", "__future__"}
@@ -109,8 +129,18 @@ def _imports(path: Path) -> list[tuple[int, str]]:
     return out
 
 
+#: The layers the top-level package re-exports from (``drake_abs.solve_lcp`` is the lcp layer's):
+#: a layer may import ``drake_abs.<name>`` when it may import all of them.
+TOP_LEVEL_SOURCES = {"drake_abs.lcp", "drake_abs.contact", "drake_abs.engine", "drake_abs.tasks"}
+
+
 def _allowed(name: str, own: str, layers: set[str], extra: set[str]) -> bool:
     root = name.split(".")[0]
+    if name.count(".") == 1 and root == "drake_abs" and TOP_LEVEL_SOURCES <= layers:
+        import drake_abs
+
+        if name.split(".")[1] in drake_abs.__all__:
+            return True
     if root in STDLIB and root != "drake_abs" or name.startswith(own):
         return True
     if any(name == c or name.startswith(c + ".") for c in COMMON | layers | extra):
