@@ -9,9 +9,9 @@ draw STL meshes either (it warns and skips them), so STL visual meshes are repla
 converted once and cached in the temp folder.
 
 URDF ``floating`` joints (a free body's 6-dof joint to the world), which MultibodyPlant's parser
-does not build, are left out of the parsed text and returned by :func:`add_models`: the builder
-gives those bodies a quaternion floating joint (:func:`floating_joints`), placed at the joint's
-``<origin>``.
+does not build, are left out of the parsed text and returned by :func:`add_models`:
+:func:`drake_abs.multibody.parsing.add_model_specs` gives those bodies a quaternion floating joint
+(:func:`floating_joints`), placed at the joint's ``<origin>``.
 
 MuJoCo (MJCF) files are parsed by Drake as published, except for what Drake drops and the step
 needs (:func:`read_mjcf`): ``<compiler settotalmass>`` (applied: the bodies' masses and inertias
@@ -146,7 +146,7 @@ def floating_joints(path: str | Path) -> tuple[FloatingJoint, ...]:
 
     MultibodyPlant's URDF parser does not build such joints (it warns and leaves the link
     free); :func:`add_models` leaves them out of what it parses and returns them, and
-    :func:`drake_abs.multibody.builder.add_scene_models` gives each link a quaternion floating
+    :func:`drake_abs.multibody.parsing.add_model_specs` gives each link a quaternion floating
     joint of that name whose default pose is the joint's ``<origin>``: the way a model file asks
     for a floating base with no singular orientation (see :mod:`drake_abs.multibody.floating`)."""
     path = Path(path)
