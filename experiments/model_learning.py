@@ -40,17 +40,15 @@ and ``data_size.png``.
 
 from __future__ import annotations
 
-import csv
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.step import Step
 from drake_abs.engine import open_loop
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.experiments import outputs
+from drake_abs.learning.prediction import Predictor, prediction_error
 from drake_abs.learning.scene_fits import FITS, fit_parameters, learned_names, perturbed_start
 from drake_abs.learning.scene_losses import learned_values, stepper_at
 from drake_abs.learning.transitions import Transitions
@@ -167,84 +165,21 @@ def collect(model, effort: np.ndarray, source: str, config: Config) -> tuple:
     return random_data, scripted
 
 
-class Predictor:
-    """A model's one-step prediction ``predict(x, u) -> (x_next, converged)`` as a stepper, for
-    the engine's open loop: a row that is not finite is not stepped and stays NaN, and so does a
-    row whose step did not converge (a lost prediction is not passed off as one)."""
-
-    parameter_names = ()
-
-    def __init__(self, predict):
-        self.predict = predict
-
-    def step(self, x, u, *, jacobians: bool = False, parameters: bool = False) -> Step:
-        out = np.full_like(x, np.nan)
-        ok = np.isfinite(x).all(axis=1)
-        if ok.any():
-            x_next, converged = self.predict(x[ok], u[ok])
-            x_next = np.array(x_next, dtype=float)
-            x_next[~np.asarray(converged, bool)] = np.nan
-            out[ok] = x_next
-        B = x.shape[0]
-        return Step(x_next=out, converged=np.isfinite(out).all(axis=1),
-                    iterations=np.zeros(B, int), impulse=np.zeros((B, 0)),
-                    mu=np.zeros((B, 0)))  # fmt: skip
-
-    @classmethod
-    def of_stepper(cls, stepper) -> Predictor:
-        def predict(x, u):
-            step = stepper.step(x, u, jacobians=False)
-            return step.x_next, step.converged
-
-        return cls(predict)
-
-    @classmethod
-    def of_ensemble(cls, ensemble) -> Predictor:
-        def predict(x, u):  # the ensemble's mean prediction
-            B = x.shape[0]
-            preds = [ensemble.predict(x, u, np.full(B, e)) for e in range(ensemble.size)]
-            return np.mean(preds, axis=0), np.ones(B, bool)
-
-        return cls(predict)
-
-
-def prediction_error(predictor: Predictor, data: Transitions, horizon: int, spread) -> tuple:
-    """Prediction error (horizon,), and the fraction of windows lost (horizon,), of
-    ``predictor`` rolled open loop (the engine's) from each window's recorded start (the test
-    ``data``' windows of ``horizon`` steps within one episode), under its recorded inputs: per
-    step k, the mean over windows of the RMS over coordinates of ``(x_hat - x) / spread``. A
-    window whose prediction is not finite (a step that did not converge, a diverging network)
-    is lost from then on: counted, not averaged."""
-    starts = data.windows(horizon)
-    if starts.size == 0:
-        raise ValueError(f"no test window of {horizon} steps: the test episodes are too short")
-    rows = starts[:, None] + np.arange(horizon)
-    run = open_loop(predictor, data.x[starts], data.u[rows], jacobians=False,
-                    on_unconverged="flag")  # fmt: skip
-    rms = np.sqrt(np.mean(((run.x[:, 1:] - data.x_next[rows]) / spread) ** 2, axis=2))
-    finite = np.isfinite(rms)
-    err = [float(np.mean(rms[finite[:, k], k])) if finite[:, k].any() else np.nan
-           for k in range(horizon)]  # fmt: skip
-    return np.array(err), 1.0 - finite.mean(axis=0)
-
-
 def _split(parts: tuple, n_train: int, n_test: int):
     """Training transitions: the first ``n_train`` episodes, alternating between the parts
     (random, scripted); test: the last ``n_test``, alternating likewise. Never the same
     episode in both."""
 
-    def pick(first: bool, n: int):
-        rows = []
-        for k in range(n):
-            part = parts[k % len(parts)]
-            ids = part.episode_ids
-            j = k // len(parts)
-            rows.append((part, ids[j] if first else ids[len(ids) - 1 - j]))
-        chosen = [p.select(np.isin(p.episode, [e for q, e in rows if q is p])) for p in parts]
-        chosen = [c for c in chosen if len(c)]
-        return chosen[0].concatenate(*chosen[1:]) if len(chosen) > 1 else chosen[0]
+    def pick(n: int, last: bool):
+        chosen = []
+        for i, part in enumerate(parts):
+            count = len(range(i, n, len(parts)))
+            ids = part.episode_ids[-count:] if last else part.episode_ids[:count]
+            if count:
+                chosen.append(part.select(np.isin(part.episode, ids)))
+        return chosen[0].concatenate(*chosen[1:])
 
-    return pick(True, n_train), pick(False, n_test)
+    return pick(n_train, False), pick(n_test, True)
 
 
 def run_case(scene: str, source: str, config: Config) -> dict:
@@ -307,73 +242,45 @@ def run_case(scene: str, source: str, config: Config) -> dict:
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     config = Config() if config is None else config
-    folder = results_dir(NAME, out)
+    folder = outputs.results_dir(NAME, out)
     start = time.perf_counter()
-    cases = []
     pairs = [(s, src) for s in config.scenes for src in config.sources]
-    for scene, source in progress(pairs, desc=NAME):
-        cases.append(run_case(scene, source, config))
+    cases = [run_case(*pair, config) for pair in outputs.progress(pairs, desc=NAME)]
+    sizes = [(c, row) for c in cases for row in c["sizes"]]
+    parameters = [[c["scene"], c["source"], row["train_episodes"], name, c["file"][j],
+                   c["start"][j], *[row["fits"][f]["theta"][j] if f in row["fits"] else ""
+                                    for f in FITS]]
+                  for c, row in sizes for j, name in enumerate(c["names"])]  # fmt: skip
+    errors = [[c["scene"], c["source"], row["train_episodes"], model, k + 1, e]
+              for c, row in sizes for model, errs in row["errors"].items()
+              for k, e in enumerate(errs)]  # fmt: skip
+    head = ["scene", "source", "train_episodes"]
     files = {
-        "parameters": _write_parameters(folder / "parameters.csv", cases),
-        "errors": _write_errors(folder / "prediction_error.csv", cases),
+        "parameters": outputs.write_csv(folder / "parameters.csv", parameters,
+                                        [*head, "parameter", "file", "start", *FITS]),
+        "errors": outputs.write_csv(folder / "prediction_error.csv", errors,
+                                    [*head, "model", "horizon", "error"]),
         "plot": _plot_errors(folder / "prediction_error.png", cases),
         "sizes_plot": _plot_sizes(folder / "data_size.png", cases),
-    }
+    }  # fmt: skip
     summary = {"experiment": NAME, "config": asdict(config), "cases": cases,
-               "seconds": time.perf_counter() - start, "files": file_list(files)}  # fmt: skip
-    (folder / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
-    summary["files"]["summary"] = str(folder / "summary.json")
+               "seconds": time.perf_counter() - start,
+               "files": outputs.file_list(files)}  # fmt: skip
+    path = outputs.write_json(folder / "summary.json", summary, indent=1)
+    summary["files"]["summary"] = str(path)
     return summary
-
-
-def _models(row: dict) -> list[str]:
-    return list(row["errors"])
-
-
-def _write_parameters(path: Path, cases: list[dict]) -> Path:
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["scene", "source", "train_episodes", "parameter", "file", "start", *FITS])
-        for c in cases:
-            for row in c["sizes"]:
-                for j, name in enumerate(c["names"]):
-                    w.writerow([c["scene"], c["source"], row["train_episodes"], name,
-                                c["file"][j], c["start"][j],
-                                *[row["fits"][f]["theta"][j] if f in row["fits"] else ""
-                                  for f in FITS]])  # fmt: skip
-    return path
-
-
-def _write_errors(path: Path, cases: list[dict]) -> Path:
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["scene", "source", "train_episodes", "model", "horizon", "error"])
-        for c in cases:
-            for row in c["sizes"]:
-                for model, errs in row["errors"].items():
-                    for k, e in enumerate(errs):
-                        w.writerow([c["scene"], c["source"], row["train_episodes"], model, k + 1,
-                                    e])  # fmt: skip
-    return path
 
 
 def _panels(path: Path, cases: list[dict], ylabel: str, draw) -> Path:
     """One log-scale panel per case side by side, ``draw(ax, case)`` filling each, saved."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = outputs.pyplot()
     fig, axes = plt.subplots(1, len(cases), figsize=(4 * len(cases), 3.4), squeeze=False)
     for ax, c in zip(axes[0], cases, strict=True):
         draw(ax, c)
         ax.set_yscale("log")
     axes[0][0].set_ylabel(ylabel)
     axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return outputs.save_figure(fig, path, dpi=110)
 
 
 def _plot_errors(path: Path, cases: list[dict]) -> Path:
@@ -396,12 +303,11 @@ def _plot_sizes(path: Path, cases: list[dict]) -> Path:
 
     def draw(ax, c):
         sizes = [row["train_transitions"] for row in c["sizes"]]
-        for model in _models(c["sizes"][0]):
+        for model in c["sizes"][0]["errors"]:
             ax.plot(sizes, [np.nanmean(row["errors"][model]) for row in c["sizes"]], "o-",
                     label=model)  # fmt: skip
-        ax.set_xscale("log")
-        ax.set_title(f"{c['scene']} / {c['source']}", fontsize=9)
-        ax.set_xlabel("training transitions")
+        ax.set(xscale="log", title=f"{c['scene']} / {c['source']}", xlabel="training transitions")
+        ax.title.set_fontsize(9)
 
     return _panels(path, cases, "mean prediction error over the horizon", draw)
 
@@ -409,19 +315,15 @@ def _plot_sizes(path: Path, cases: list[dict]) -> Path:
 def report(summary: dict) -> str:
     lines = [f"# Model learning ({summary['seconds']:.0f} s)", ""]
     for c in summary["cases"]:
-        lines.append(f"## {c['scene']} from {c['source']} ({c['transitions']} transitions)")
         last = c["sizes"][-1]
-        head = ["parameter", "file", "start", *last["fits"]]
-        lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
-        for j, name in enumerate(c["names"]):
-            vals = [c["file"][j], c["start"][j]] + [f["theta"][j] for f in last["fits"].values()]
-            lines.append(f"| {name} | " + " | ".join(f"{v:.4g}" for v in vals) + " |")
-        lines.append("")
-        head = ["training episodes", *_models(last)]
-        lines += ["mean prediction error over the horizon (data std):", "",
-                  "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]  # fmt: skip
-        for row in c["sizes"]:
-            cells = [f"{np.nanmean(row['errors'][m]):.3g}" for m in _models(last)]
-            lines.append(f"| {row['train_episodes']} | " + " | ".join(cells) + " |")
-        lines.append("")
+        lines += [f"## {c['scene']} from {c['source']} ({c['transitions']} transitions)"]
+        lines += outputs.markdown_table(["parameter", "file", "start", *last["fits"]], [
+            [name, *(f"{v:.4g}" for v in [c["file"][j], c["start"][j]]
+                     + [f["theta"][j] for f in last["fits"].values()])]
+            for j, name in enumerate(c["names"])])  # fmt: skip
+        lines += ["", "mean prediction error over the horizon (data std):", ""]
+        lines += outputs.markdown_table(["training episodes", *last["errors"]], [
+            [row["train_episodes"], *(f"{np.nanmean(row['errors'][m]):.3g}"
+                                      for m in last["errors"])]
+            for row in c["sizes"]]) + [""]  # fmt: skip
     return "\n".join(lines)

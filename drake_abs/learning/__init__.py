@@ -13,7 +13,8 @@
 - :mod:`~drake_abs.learning.scene_fits`: which of a scene's parameters are learned, a fit's
   seeded start off the model file's values, and the fits by name;
 - :mod:`~drake_abs.learning.transitions`: recorded transitions (from an engine run), split by
-  episode, and a model's one-step errors on them.
+  episode, and a model's one-step errors on them;
+- :mod:`~drake_abs.learning.prediction`: a model's open-loop (k-step) prediction error on them.
 """
 
 from drake_abs.learning.fitting import FitResult, fit_gradient, fit_random_search
