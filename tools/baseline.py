@@ -62,7 +62,13 @@ TIMING = re.compile(
 def _is_timing(key: str) -> bool:
     """Entries that measure the clock (skipped by the comparison); a time *step* is a setting."""
     k = key.lower().replace("time_step", "h")
-    return bool(TIMING.search(key.rsplit("/", 1)[-1].replace("time_step", "h")) or "time" in k)
+    folders = k.split("/")[:-1]  # e.g. /seconds/<row> or /profile_seconds/<part>: all clock
+    return bool(
+        TIMING.search(key.rsplit("/", 1)[-1].replace("time_step", "h"))
+        or "time" in k
+        or any(f in ("seconds", "profile_seconds") for f in folders)
+        or k.endswith("batching_gain")
+    )
 
 
 def _bin(name: str) -> str:
