@@ -84,7 +84,7 @@ LAYERS: dict[str, tuple[str, set[str], set[str]]] = {
         {"pydrake", "meshcat", "matplotlib"},
     ),  # fmt: skip
     # the top: every layer below, and the libraries the experiments drive (no experiment
-    # imports another: tests/test_import_graph.py)
+    # imports another: tests/test_module_imports.py)
     "experiments": (
         "drake_abs.experiments",
         {
