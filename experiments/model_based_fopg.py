@@ -28,8 +28,6 @@ on our plant with the file's parameters. Outputs in ``out``: ``summary.json``,
 
 from __future__ import annotations
 
-import csv
-import json
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -37,8 +35,20 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.engine import open_loop, rollout
+from drake_abs.experiments import outputs
+from drake_abs.learning.scene_fits import FITS, fit_parameters, learned_names, perturbed_start
 from drake_abs.learning.scene_losses import learned_values, stepper_at
+from drake_abs.learning.transitions import Transitions
+from drake_abs.policy.controls import TimeVaryingController, episode_seed, uniform_inputs
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.saving import save_policy
+from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
+from drake_abs.tasks.adapters import ActionScaled
+from drake_abs.tasks.episodes import episode_statistics, score_episodes
+from drake_abs.tasks.locomotion import TASKS, locomotion_task
+from drake_abs.tasks.locomotion_training import LocomotionTraining, train_method
+from drake_abs.tasks.locomotion_training import evaluate as our_return
 
 NAME = "model-based-fopg"
 ARMS = ("learned", "file", "start")
@@ -80,11 +90,8 @@ class Config:
     def check(self) -> None:
         if self.task not in ("hopper", "half_cheetah"):
             raise ValueError(f"task must be 'hopper' or 'half_cheetah'; got {self.task!r}")
-        if self.fit not in ("violation_implicit", "explicit", "naive_implicit", "random_search"):
-            raise ValueError(
-                "fit must be 'violation_implicit', 'explicit', 'naive_implicit' or "
-                f"'random_search'; got {self.fit!r}"
-            )
+        if self.fit not in FITS:
+            raise ValueError(f"fit must be one of {FITS}; got {self.fit!r}")
         for name in ("rounds", "initial_episodes", "steps", "policy_iterations", "rollouts",
                      "horizon", "fit_iterations", "eval_episodes", "eval_steps"):  # fmt: skip
             if int(getattr(self, name)) < 1:
@@ -97,8 +104,6 @@ def noisy_feedback(task, inner, theta, sigma: float, effort: np.ndarray, seeds, 
     one row per episode, its noise xi (steps, nu) drawn by ``default_rng(seed)`` of the
     episode's seed: a :class:`~drake_abs.policy.controls.TimeVaryingController`. Each row is
     evaluated by itself (a batched matrix product rounds otherwise than one row's)."""
-    from drake_abs.policy.controls import TimeVaryingController
-
     policy, gears = task.policy(inner), np.asarray(task.stepper.scale, float)
     noise = np.stack([np.random.default_rng(s).standard_normal((steps, task.nu)) for s in seeds])
 
@@ -114,49 +119,31 @@ def mujoco_episodes(source, task, episodes: int, steps: int, seed: int, controls
     episode e from gymnasium's reset of the seed ``episode_seed(seed, e)``, under
     ``controls(seeds)``: inputs (episodes, steps, nu) or a time-varying policy, ending where the
     task terminates (the Hopper falls)."""
-    from drake_abs.engine import open_loop, rollout
-    from drake_abs.learning.transitions import Transitions
-    from drake_abs.policy.controls import episode_seed
-    from drake_abs.reference.gymnasium_mujoco import reset_states
-
     seeds = [episode_seed(seed, e) for e in range(episodes)]
-    x0 = reset_states(task.env_id, seeds)
-    made = controls(seeds)
+    x0, made = reset_states(task.env_id, seeds), controls(seeds)
     if isinstance(made, np.ndarray):
         run = open_loop(source.stepper, x0, made, jacobians=False)
     else:
-        zeros = np.zeros((episodes, steps, task.nu))
-        run = rollout(source.stepper, made, np.zeros(0), x0, zeros, sigma=0.0, gradient=False,
-                      on_unconverged="flag")  # fmt: skip
+        run = rollout(source.stepper, made, np.zeros(0), x0, np.zeros((episodes, steps, task.nu)),
+                      sigma=0.0, gradient=False, on_unconverged="flag")  # fmt: skip
     return Transitions.from_trajectory(run, source=source.name, time_step=source.time_step,
                                        terminated=task.reward.terminated)  # fmt: skip
 
 
 def with_model(task, names, theta):
     """The locomotion task with its stepper's learned parameters ``names`` set to ``theta``."""
-    from drake_abs.tasks.adapters import ActionScaled
-
     inner = stepper_at(task.stepper.stepper, names, theta)
     return replace(task, stepper=ActionScaled(inner, task.stepper.scale))
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
-    from drake_abs.learning.scene_fits import fit_parameters, learned_names, perturbed_start
     from drake_abs.multibody import build_scene_model
-    from drake_abs.policy.controls import uniform_inputs
-    from drake_abs.policy.policies import LinearPolicy
-    from drake_abs.policy.saving import save_policy
-    from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
     from drake_abs.reference.mujoco_plant import MujocoStepper
     from drake_abs.reference.scene_sources import mujoco_source
-    from drake_abs.tasks.episodes import episode_statistics, score_episodes
-    from drake_abs.tasks.locomotion import TASKS, locomotion_task
-    from drake_abs.tasks.locomotion_training import LocomotionTraining, train_method
-    from drake_abs.tasks.locomotion_training import evaluate as our_return
 
     config = Config() if config is None else config
     config.check()
-    folder = results_dir(NAME, out)
+    folder = outputs.results_dir(NAME, out)
     start_time = time.perf_counter()
     scene = TASKS[config.task].scene
     env_id = TASKS[config.task].env_id
@@ -207,10 +194,15 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     theta_pi = {arm: np.zeros(inner.n_params) for arm in ARMS}
     theta_model = theta_start.copy()
     rows, fits = [], []
-    for arm in ARMS:
-        rows.append({"round": 0, "arm": arm, "transitions": int(data.x.shape[0]),
-                     **evaluate(theta_pi[arm])})  # fmt: skip
-    for k in progress(range(1, config.rounds + 1), desc=NAME):
+
+    def record(k: int, seconds: dict | None = None) -> None:
+        for arm in ARMS:
+            rows.append({"round": k, "arm": arm, "transitions": len(data),
+                         **({"train_seconds": seconds[arm]} if seconds else {}),
+                         **evaluate(theta_pi[arm])})  # fmt: skip
+
+    record(0)
+    for k in outputs.progress(range(1, config.rounds + 1), desc=NAME):
         # (1) the model update on all data so far, from the last round's theta
         t0 = time.perf_counter()
         result = fit_parameters(
@@ -241,70 +233,46 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         new = mujoco_episodes(source, base, config.episodes_per_round, config.steps,
                               config.seed * 100 + k, explore)  # fmt: skip
         data = data.concatenate(new)
-        for arm in ARMS:
-            rows.append({"round": k, "arm": arm, "transitions": int(data.x.shape[0]),
-                         "train_seconds": seconds[arm], **evaluate(theta_pi[arm])})  # fmt: skip
-    policies = folder / "policies"
-    policies.mkdir(exist_ok=True)
-    saved = {}
-    for arm in ARMS:
-        paths = save_policy(policies / f"{config.task}_{arm}", base.policy(inner),
-                            theta_pi[arm], task=config.task,
-                            config={"arm": arm, **asdict(config)})  # fmt: skip
-        saved[arm] = str(paths["json"])
-    files = {"rounds": _write_rounds(folder / "rounds.csv", rows),
+        record(k, seconds)
+    saved = {arm: str(save_policy(folder / "policies" / f"{config.task}_{arm}",
+                                  base.policy(inner), theta_pi[arm], task=config.task,
+                                  config={"arm": arm, **asdict(config)})["json"])
+             for arm in ARMS}  # fmt: skip
+    keys = ["round", "arm", "transitions", "mujoco_return", "mujoco_return_std",
+            "mujoco_length", "our_return", "train_seconds"]  # fmt: skip
+    files = {"rounds": outputs.write_csv(folder / "rounds.csv",
+                                         [[r.get(k, "") for k in keys] for r in rows], keys),
              "plot": _plot(folder / "closed_loop.png", rows, config)}  # fmt: skip
     summary = {
         "experiment": NAME, "config": asdict(config), "names": names, "file": truth.tolist(),
         "start": theta_start.tolist(), "learned": theta_model.tolist(), "fits": fits,
         "rows": rows, "frame": frame, "policies": saved,
-        "seconds": time.perf_counter() - start_time, "files": file_list(files),
+        "seconds": time.perf_counter() - start_time, "files": outputs.file_list(files),
     }  # fmt: skip
-    (folder / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
-    summary["files"]["summary"] = str(folder / "summary.json")
+    path = outputs.write_json(folder / "summary.json", summary, indent=1)
+    summary["files"]["summary"] = str(path)
     return summary
 
 
-def _write_rounds(path: Path, rows: list[dict]) -> Path:
-    keys = ["round", "arm", "transitions", "mujoco_return", "mujoco_return_std",
-            "mujoco_length", "our_return", "train_seconds"]  # fmt: skip
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(keys)
-        for r in rows:
-            w.writerow([r.get(k, "") for k in keys])
-    return path
-
-
 def _plot(path: Path, rows: list[dict], config: Config) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 3.4))
+    fig, ax = outputs.pyplot().subplots(figsize=(5, 3.4))
     for arm in ARMS:
         mine = [r for r in rows if r["arm"] == arm]
         ax.plot([r["round"] for r in mine], [r["mujoco_return"] for r in mine], "o-", label=arm)
-    ax.set_xlabel("round (model fit + policy iterations + MuJoCo episodes)")
-    ax.set_ylabel(f"MuJoCo return ({config.eval_steps} steps)")
+    ax.set(xlabel="round (model fit + policy iterations + MuJoCo episodes)",
+           ylabel=f"MuJoCo return ({config.eval_steps} steps)")  # fmt: skip
     ax.set_title(f"Algorithm 2 in closed loop: {config.task}", fontsize=9)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return outputs.save_figure(fig, path, dpi=110)
 
 
 def report(summary: dict) -> str:
-    lines = [f"# Model-based FOPG in closed loop with MuJoCo ({summary['seconds']:.0f} s)", "",
-             "| parameter | file | start | learned |", "| --- | --- | --- | --- |"]  # fmt: skip
-    for j, name in enumerate(summary["names"]):
-        lines.append(f"| {name} | {summary['file'][j]:.4g} | {summary['start'][j]:.4g} | "
-                     f"{summary['learned'][j]:.4g} |")  # fmt: skip
-    lines += ["", "| round | arm | MuJoCo return | our plant's return |",
-              "| --- | --- | --- | --- |"]  # fmt: skip
-    for r in summary["rows"]:
-        lines.append(f"| {r['round']} | {r['arm']} | {r['mujoco_return']:.1f} "
-                     f"± {r['mujoco_return_std']:.1f} | {r['our_return']:.1f} |")  # fmt: skip
+    lines = [f"# Model-based FOPG in closed loop with MuJoCo ({summary['seconds']:.0f} s)", ""]
+    lines += outputs.markdown_table(["parameter", "file", "start", "learned"], [
+        [name, *(f"{summary[k][j]:.4g}" for k in ("file", "start", "learned"))]
+        for j, name in enumerate(summary["names"])])  # fmt: skip
+    lines += [""] + outputs.markdown_table(
+        ["round", "arm", "MuJoCo return", "our plant's return"],
+        [[r["round"], r["arm"], f"{r['mujoco_return']:.1f} ± {r['mujoco_return_std']:.1f}",
+          f"{r['our_return']:.1f}"] for r in summary["rows"]])  # fmt: skip
     return "\n".join(lines)
