@@ -29,7 +29,6 @@ Step sizes: see :mod:`drake_abs.mpc.graybox` (the printed formula is checked and
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -37,18 +36,24 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.engine import rollout
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.experiments.outputs import (
+    file_list,
+    progress,
+    pyplot,
+    results_dir,
+    save_figure,
+    write_json,
+)
 from drake_abs.mpc.graybox import (
-    ClosedLoopResult,
     GrayBoxResult,
     Schedule,
     TrackingCost,
-    closed_loop,
     graybox_optimize,
     step_size_as_printed,
 )
-from drake_abs.mpc.qp_mpc import MpcSpec, MpcStatus, QpMpc, riccati_terminal_cost, theta_from_cost
+from drake_abs.mpc.qp_mpc import MpcSpec, QpMpc, riccati_terminal_cost, theta_from_cost
 from drake_abs.mpc.sysid import LinearModel, identify_linear_model
+from drake_abs.mpc.tuning import ClosedLoopEvaluator, lbfgs_tune
 from drake_abs.policy.controls import TimeVaryingController
 from drake_abs.tasks import quadcopter as qc
 
@@ -116,14 +121,9 @@ class Config:
         )
 
     def __post_init__(self):
-        for name in (
-            "iterations",
-            "steps",
-            "horizon",
-            "sysid_trajectories",
-            "sysid_length",
-            "reference_iterations",
-        ):
+        counts = ("iterations", "steps", "horizon", "sysid_trajectories", "sysid_length",
+                  "reference_iterations")  # fmt: skip
+        for name in counts:
             value = getattr(self, name)
             if int(value) != value or value < (0 if name == "iterations" else 1):
                 raise ValueError(f"Config.{name} must be a positive integer; got {value!r}")
@@ -133,23 +133,6 @@ class Config:
             raise ValueError("Config.x0 and Config.sysid_spread need 12 entries")
 
 
-@dataclass
-class _Problem:
-    params: qc.QuadcopterParams
-    spec: MpcSpec
-    cost: TrackingCost
-    model: LinearModel
-    theta0: np.ndarray
-    x0: np.ndarray
-
-    @property
-    def plant(self) -> qc.QuadcopterStepper:
-        return qc.QuadcopterStepper(self.params)
-
-    def controller(self) -> QpMpc:
-        return QpMpc(self.spec, self.theta0)
-
-
 def identify(config: Config, rng: np.random.Generator) -> tuple[LinearModel, dict]:
     """Step 1: closed-loop data near the target and the least-squares model."""
     prm = config.params
@@ -157,15 +140,13 @@ def identify(config: Config, rng: np.random.Generator) -> tuple[LinearModel, dic
     x_min, x_max = qc.QuadcopterConstraints().state_bounds()
     u_min, u_max = qc.QuadcopterConstraints().input_bounds()
     A_h, B_h = qc.hover_linearization(prm)
-    Q, R = np.diag(STAGE_Q), np.diag(STAGE_R)
-    P, _ = riccati_terminal_cost(A_h, B_h, Q, R)
+    P, _ = riccati_terminal_cost(A_h, B_h, np.diag(STAGE_Q), np.diag(STAGE_R))
     spec = MpcSpec(A_h, B_h, config.horizon, x_ref, u_ref, u_min, u_max, x_min, x_max)
     stabilising = QpMpc(spec, theta_from_cost(STAGE_Q, STAGE_R, P))
     # one engine rollout per trajectory (the MPC's warm start runs through them in order): the
     # stabilising MPC plus seeded input noise, clipped to the rotor limits
     fallbacks, runs = [], []
-    spread = np.asarray(config.sysid_spread)
-    L = config.sysid_length
+    spread, L = np.asarray(config.sysid_spread), config.sysid_length
     for _ in range(config.sysid_trajectories):
         x0 = x_ref + spread * rng.uniform(-1.0, 1.0, 12)
         noise = rng.normal(0.0, config.sysid_input_noise, (L, 4))
@@ -194,66 +175,31 @@ def identify(config: Config, rng: np.random.Generator) -> tuple[LinearModel, dic
     return model, info
 
 
-def build_problem(config: Config, rng: np.random.Generator) -> tuple[_Problem, dict]:
-    """Steps 1-2: the identified model, the MPC spec, the cost and theta_0."""
-    prm = config.params
+def build_problem(config: Config, rng: np.random.Generator):
+    """Steps 1-2: the MPC spec on the identified model, the cost, theta_0 and the
+    identification's summary."""
     model, sysid = identify(config, rng)
-    x_ref, u_ref = np.array(X_REF), prm.hover_input()
+    x_ref, u_ref = np.array(X_REF), config.params.hover_input()
     con = qc.QuadcopterConstraints()
-    x_min, x_max = con.state_bounds()
-    u_min, u_max = con.input_bounds()
-    spec = MpcSpec(
-        model.A,
-        model.B,
-        config.horizon,
-        x_ref,
-        u_ref,
-        u_min,
-        u_max,
-        x_min,
-        x_max,
-        slack_linear=config.slack_penalty,
-        slack_quadratic=config.slack_penalty,
-    )
+    (x_min, x_max), (u_min, u_max) = con.state_bounds(), con.input_bounds()
+    slack = {"slack_linear": config.slack_penalty, "slack_quadratic": config.slack_penalty}
+    spec = MpcSpec(model.A, model.B, config.horizon, x_ref, u_ref, u_min, u_max, x_min, x_max,
+                   **slack)  # fmt: skip
     Q, R = np.diag(STAGE_Q), np.diag(STAGE_R)
     P, _ = riccati_terminal_cost(model.A, model.B, Q, R)
-    theta0 = theta_from_cost(STAGE_Q, STAGE_R, P)
-    cost = TrackingCost(
-        Q, R, np.diag(TERMINAL_P), x_ref, u_ref, x_min, x_max, config.penalty_weight
-    )
-    problem = _Problem(prm, spec, cost, model, theta0, np.asarray(config.x0, dtype=float))
-    return problem, sysid
+    cost = TrackingCost(Q, R, np.diag(TERMINAL_P), x_ref, u_ref, x_min, x_max,
+                        config.penalty_weight)  # fmt: skip
+    return spec, cost, theta_from_cost(STAGE_Q, STAGE_R, P), sysid
 
 
-class _Counting:
-    """evaluate(theta, with_gradient) on a fresh controller (its own OSQP warm start), counting
-    the MPC statuses of every rollout it runs."""
-
-    def __init__(self, problem: _Problem, source: str, steps: int):
-        self.problem, self.source, self.steps = problem, source, steps
-        self.controller = problem.controller()
-        self.rollouts = self.fallback_steps = self.inaccurate_steps = 0
-
-    def __call__(self, theta: np.ndarray, with_gradient: bool) -> ClosedLoopResult:
-        p = self.problem
-        r = closed_loop(
-            self.controller,
-            theta,
-            p.x0,
-            self.steps,
-            p.plant,
-            p.cost,
-            gradient=self.source if with_gradient else None,
-            model=(p.spec.A, p.spec.B),
-        )
-        self.rollouts += 1
-        self.fallback_steps += r.fallback_steps
-        self.inaccurate_steps += int(np.sum(r.status == int(MpcStatus.SOLVED_INACCURATE)))
-        return r
+def _evaluator(config, spec, cost, theta0, source="model") -> ClosedLoopEvaluator:
+    """A fresh controller (its own OSQP warm start) on the quadcopter, counting MPC statuses."""
+    plant = qc.QuadcopterStepper(config.params)
+    return ClosedLoopEvaluator(QpMpc(spec, theta0), config.x0, config.steps, plant, cost, source)
 
 
-def _tune(problem, config, schedule, source, label) -> tuple[GrayBoxResult, dict]:
-    evaluate = _Counting(problem, source, config.steps)
+def _tune(config, spec, cost, theta0, schedule, source, label) -> tuple[GrayBoxResult, dict]:
+    evaluate = _evaluator(config, spec, cost, theta0, source)
     bar = progress(total=config.iterations + 1, desc=method_label(label))
 
     def on_iterate(rec):
@@ -262,29 +208,19 @@ def _tune(problem, config, schedule, source, label) -> tuple[GrayBoxResult, dict
 
     start = time.perf_counter()
     result = graybox_optimize(
-        evaluate,
-        problem.theta0,
-        iterations=config.iterations,
-        schedule=schedule,
-        rng=np.random.default_rng(config.seed + 1),
-        delta=config.delta,
-        bound=config.theta_bound,
+        evaluate, theta0, iterations=config.iterations, schedule=schedule,
+        rng=np.random.default_rng(config.seed + 1), delta=config.delta, bound=config.theta_bound,
         progress=on_iterate,
-    )
+    )  # fmt: skip
     bar.close()
-    stats = {
-        "seconds": time.perf_counter() - start,
-        "rollouts": evaluate.rollouts,
-        "fallback_steps": evaluate.fallback_steps,
-        "inaccurate_steps": evaluate.inaccurate_steps,
-    }
-    return result, stats
+    return result, {"seconds": time.perf_counter() - start, **evaluate.counts()}
 
 
 def _method_summary(result: GrayBoxResult, stats: dict) -> dict:
     trace = result.trace
-    totals = np.array([r.total for r in trace])
+    totals = [r.total for r in trace]
     best = int(np.argmin(totals))
+    series = ("tracking_cost", "violation", "total", "direction_norm")
     return {
         "initial_total": trace[0].total,
         "final_tracking_cost": trace[-1].tracking_cost,
@@ -293,43 +229,26 @@ def _method_summary(result: GrayBoxResult, stats: dict) -> dict:
         "best_total": float(totals[best]),
         "best_iteration": trace[best].k,
         **stats,
-        "tracking_cost": [r.tracking_cost for r in trace],
-        "violation": [r.violation for r in trace],
-        "total": [r.total for r in trace],
-        "direction_norm": [r.direction_norm for r in trace],
+        **{key: [getattr(r, key) for r in trace] for key in series},
         "theta_final": result.theta.tolist(),
     }
 
 
-def _exact_reference(problem: _Problem, config: Config) -> tuple[ClosedLoopResult, dict]:
+def _exact_reference(config, spec, cost, theta0):
     """Tuning with perfect model knowledge, run towards convergence: box-constrained L-BFGS-B
-    (scipy) on the total cost with the exact closed-loop gradient (eq. 8, true Jacobians)."""
-    import scipy.optimize
-
-    evaluate = _Counting(problem, "exact", config.steps)
-    history = []
-
-    def fun(theta):
-        r = evaluate(theta, True)
-        return r.total, r.gradient
-
+    on the total cost with the exact closed-loop gradient (eq. 8, true Jacobians)."""
+    evaluate = _evaluator(config, spec, cost, theta0, "exact")
     bar = progress(total=config.reference_iterations, desc="exact model, L-BFGS-B")
 
-    def callback(intermediate_result):
-        history.append(float(intermediate_result.fun))
-        bar.set_postfix(total=f"{intermediate_result.fun:.1f}")
+    def on_iteration(total):
+        bar.set_postfix(total=f"{total:.1f}")
         bar.update()
 
     start = time.perf_counter()
-    res = scipy.optimize.minimize(
-        fun,
-        problem.theta0,
-        jac=True,
-        method="L-BFGS-B",
-        bounds=[(-config.theta_bound, config.theta_bound)] * problem.theta0.size,
-        options={"maxiter": config.reference_iterations},
-        callback=callback,
-    )
+    res, history = lbfgs_tune(
+        evaluate, theta0, bound=config.theta_bound, iterations=config.reference_iterations,
+        callback=on_iteration,
+    )  # fmt: skip
     bar.close()
     final = evaluate(res.x, False)
     info = {
@@ -340,11 +259,9 @@ def _exact_reference(problem: _Problem, config: Config) -> tuple[ClosedLoopResul
         "final_tracking_cost": final.tracking_cost,
         "final_violation": final.violation,
         "final_total": final.total,
-        "total": [float(fun_value) for fun_value in history],
+        "total": history,
         "seconds": time.perf_counter() - start,
-        "rollouts": evaluate.rollouts,
-        "fallback_steps": evaluate.fallback_steps,
-        "inaccurate_steps": evaluate.inaccurate_steps,
+        **evaluate.counts(),
         "theta_final": res.x.tolist(),
     }
     return final, info
@@ -355,102 +272,72 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     results/mpc-quadcopter); returns the summary dict (``summary["files"]``: absolute paths)."""
     config = config or Config()
     out = results_dir(NAME, out)
-    rng = np.random.default_rng(config.seed)
     start = time.perf_counter()
-    problem, sysid = build_problem(config, rng)
-
-    methods: list[tuple[str, Schedule, str]] = [
-        (f"gamma={g:g}", Schedule(gamma=g), "model") for g in config.gammas
-    ]
+    spec, cost, theta0, sysid = build_problem(config, np.random.default_rng(config.seed))
+    methods = [(f"gamma={g:g}", Schedule(gamma=g), "model") for g in config.gammas]
     if config.baselines:
-        methods += [
-            ("model only (eta=1)", Schedule(eta=1.0), "model"),
-            ("zeroth order only (eta=0)", Schedule(eta=0.0), "model"),
-        ]
+        methods += [("model only (eta=1)", Schedule(eta=1.0), "model"),
+                    ("zeroth order only (eta=0)", Schedule(eta=0.0), "model")]  # fmt: skip
     if config.exact_model:
         methods.append(("exact model", Schedule(eta=1.0, name="exact model"), "exact"))
     results: dict[str, GrayBoxResult] = {}
     summary_methods = {}
     for label, schedule, source in progress(methods, desc=f"{NAME}: methods"):
-        result, stats = _tune(problem, config, schedule, source, label)
-        results[label] = result
-        summary_methods[label] = _method_summary(result, stats)
+        results[label], stats = _tune(config, spec, cost, theta0, schedule, source, label)
+        summary_methods[label] = _method_summary(results[label], stats)
     reference = reference_info = None
     if config.exact_model:
-        reference, reference_info = _exact_reference(problem, config)
+        reference, reference_info = _exact_reference(config, spec, cost, theta0)
 
     # the printed step-size formula, one model-based step from theta_0 (see drake_abs.mpc.graybox)
-    evaluate = _Counting(problem, "model", config.steps)
-    r0 = evaluate(problem.theta0, True)
-    theta1 = np.clip(
-        problem.theta0 - step_size_as_printed(1) * r0.gradient,
-        -config.theta_bound,
-        config.theta_bound,
-    )
-    r1 = evaluate(theta1, False)
-    printed = {
-        "alpha_1": step_size_as_printed(1),
-        "total_before": r0.total,
-        "total_after_one_step": r1.total,
-    }
+    evaluate = _evaluator(config, spec, cost, theta0)
+    r0 = evaluate(theta0, True)
+    alpha_1 = step_size_as_printed(1)
+    theta1 = np.clip(theta0 - alpha_1 * r0.gradient, -config.theta_bound, config.theta_bound)
+    printed = {"alpha_1": alpha_1, "total_before": r0.total,
+               "total_after_one_step": evaluate(theta1, False).total}  # fmt: skip
 
     trained_label = f"gamma={config.trained_gamma:g}"
     trained = results[trained_label]
-    comparison = {
-        "trained_controller": trained_label,
-        "paper": {
-            "trained": PAPER_TRAINED_COST,
-            "exact_model": PAPER_EXACT_MODEL_COST,
-            "suboptimality": PAPER_TRAINED_COST / PAPER_EXACT_MODEL_COST - 1.0,
-        },
-    }
-    if config.exact_model:
-        ours_t = trained.trace[-1].total
-        same = results["exact model"].trace[-1].total
-        comparison["ours"] = {
-            "trained": ours_t,
-            "exact_model": reference.total,
-            "suboptimality": ours_t / reference.total - 1.0,
-            "exact_model_same_schedule": same,
-            "suboptimality_vs_same_schedule": ours_t / same - 1.0,
-            "trained_tracking_cost": trained.trace[-1].tracking_cost,
-            "exact_model_tracking_cost": reference.tracking_cost,
-            "initial": trained.trace[0].total,
-        }
+    initial, last = trained.trace[0], trained.trace[-1]
+    paper = {"trained": PAPER_TRAINED_COST, "exact_model": PAPER_EXACT_MODEL_COST,
+             "suboptimality": PAPER_TRAINED_COST / PAPER_EXACT_MODEL_COST - 1.0}  # fmt: skip
+    comparison = {"trained_controller": trained_label, "paper": paper}
     files = file_list({"figure1": out / "figure1_convergence.png", "summary": out / "summary.json"})
     _figure1(summary_methods, reference_info, Path(files["figure1"]))
     if config.exact_model:
+        same = results["exact model"].trace[-1].total
+        comparison["ours"] = {
+            "trained": last.total,
+            "exact_model": reference.total,
+            "suboptimality": last.total / reference.total - 1.0,
+            "exact_model_same_schedule": same,
+            "suboptimality_vs_same_schedule": last.total / same - 1.0,
+            "trained_tracking_cost": last.tracking_cost,
+            "exact_model_tracking_cost": reference.tracking_cost,
+            "initial": initial.total,
+        }
         files["figure2"] = str(out / "figure2_trajectories.png")
-        _figure2(trained.final, reference, problem, Path(files["figure2"]))
+        _figure2(trained.final.x, reference.x, config.params.time_step, Path(files["figure2"]))
         if config.meshcat:
             from drake_abs.diagrams.quadcopter_visualization import record_quadcopter_html
 
-            files["meshcat_html"] = str(
-                record_quadcopter_html(
-                    {"trained": trained.final.x, "exact_model": reference.x},
-                    out / "flights.html",
-                    time_step=config.params.time_step,
-                    target=np.array(X_REF[:3]),
-                )
-            )
+            flights = {"trained": trained.final.x, "exact_model": reference.x}
+            files["meshcat_html"] = str(record_quadcopter_html(
+                flights, out / "flights.html", time_step=config.params.time_step,
+                target=np.array(X_REF[:3])))  # fmt: skip
     summary = {
-        "config": _jsonable(asdict(config)),
+        "config": asdict(config),
         "assumptions": {
             "x0": "not stated in the paper; hover at the origin",
             "step_size": "alpha_k = 5e-5 (log k + 2) / (k + 1)^0.75 (printed formula diverges)",
             "theta_set": f"box |theta_i| <= {config.theta_bound} (not stated in the paper)",
             "slack_penalty": f"{config.slack_penalty} (s's + 1's)",
-            "exact_model_tuning": (
-                "reference: L-BFGS-B with the exact gradient (towards convergence); also the "
-                "gray-box schedule with eta = 1 and the exact gradient"
-            ),
+            "exact_model_tuning": "reference: L-BFGS-B with the exact gradient (towards "
+            "convergence); also the gray-box schedule with eta = 1 and the exact gradient",
         },
         "sysid": sysid,
-        "initial": {
-            "tracking_cost": trained.trace[0].tracking_cost,
-            "violation": trained.trace[0].violation,
-            "total": trained.trace[0].total,
-        },
+        "initial": {key: getattr(initial, key) for key in ("tracking_cost", "violation", "total")},
         "methods": summary_methods,
         "exact_model_reference": reference_info,
         "comparison": comparison,
@@ -459,22 +346,8 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         "folder": str(out),
         "files": file_list(files),
     }
-    Path(files["summary"]).write_text(json.dumps(_jsonable(summary), indent=2))
+    write_json(files["summary"], summary, finite=True)
     return summary
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
 
 
 def method_label(label: str) -> str:
@@ -485,66 +358,43 @@ def method_label(label: str) -> str:
 
 
 def _figure1(methods: dict, reference: dict | None, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    fig, ax = pyplot().subplots(1, 2, figsize=(12, 4.2))
     for label, m in methods.items():
         k = np.arange(1, len(m["total"]) + 1)
         style = {"color": "k", "ls": "--"} if label == "exact model" else {}
         ax[0].plot(k, m["tracking_cost"], label=method_label(label), **style)
         ax[1].plot(k, m["violation"], label=method_label(label), **style)
     if reference is not None:
-        ax[0].axhline(
-            reference["final_tracking_cost"], color="k", ls=":", label="exact model, L-BFGS-B"
-        )
+        ax[0].axhline(reference["final_tracking_cost"], color="k", ls=":",
+                      label="exact model, L-BFGS-B")  # fmt: skip
         ax[1].axhline(reference["final_violation"], color="k", ls=":")
     ax[0].set(xlabel="iteration k", ylabel="tracking cost C(theta_k)", title="tracking cost")
-    ax[1].set(
-        xlabel="iteration k",
-        ylabel="dist_1(x, X^{T+1}) (state units)",
-        title="constraint violation",
-    )
+    ax[1].set(xlabel="iteration k", ylabel="dist_1(x, X^{T+1}) (state units)",
+              title="constraint violation")  # fmt: skip
     ax[1].set_yscale("symlog", linthresh=1e-3)
     ax[1].set_ylim(bottom=0.0)
     ax[0].legend(fontsize=8)
     fig.suptitle("Zuliani et al. 2025, Figure 1 analogue: quadcopter, gray-box tuning")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    save_figure(fig, path, dpi=130)
 
 
-def _figure2(
-    trained: ClosedLoopResult, exact: ClosedLoopResult, problem: _Problem, path: Path
-) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = np.arange(trained.x.shape[0]) * problem.params.time_step
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
-    colors = ("C0", "C1", "C2")
-    for i, name in enumerate(("p_x", "p_y", "p_z")):
-        ax[0].plot(t, trained.x[:, i], color=colors[i], label=f"{name}, trained")
-        ax[0].plot(t, exact.x[:, i], color=colors[i], ls="-.", label=f"{name}, exact model")
-    for i, name in enumerate(("roll", "pitch", "yaw")):
-        ax[1].plot(t, trained.x[:, 6 + i], color=colors[i], label=f"{name}, trained")
-        ax[1].plot(t, exact.x[:, 6 + i], color=colors[i], ls="-.",
-                   label=f"{name}, exact model")  # fmt: skip
+def _figure2(trained: np.ndarray, exact: np.ndarray, time_step: float, path: Path) -> None:
+    """Position and attitude of the trained and the exact-model flights, states (T + 1, 12)."""
+    t = np.arange(trained.shape[0]) * time_step
+    fig, ax = pyplot().subplots(1, 2, figsize=(12, 4.2))
+    for a, first, names in (
+        (ax[0], 0, ("p_x", "p_y", "p_z")),
+        (ax[1], 6, ("roll", "pitch", "yaw")),
+    ):
+        for i, name in enumerate(names):
+            a.plot(t, trained[:, first + i], color=f"C{i}", label=f"{name}, trained")
+            a.plot(t, exact[:, first + i], color=f"C{i}", ls="-.", label=f"{name}, exact model")
+        a.legend(fontsize=7, ncol=2)
     ax[0].set(xlabel="t (s)", ylabel="position (m)", title="position")
     ax[1].set(xlabel="t (s)", ylabel="angle (rad)", title="attitude")
-    for a in ax:
-        a.legend(fontsize=7, ncol=2)
-    fig.suptitle(
-        "Zuliani et al. 2025, Figure 2 analogue: trained (solid) vs optimised with the exact "
-        "model (dash-dot)"
-    )
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    fig.suptitle("Zuliani et al. 2025, Figure 2 analogue: trained (solid) vs optimised with the "
+                 "exact model (dash-dot)")  # fmt: skip
+    save_figure(fig, path, dpi=130)
 
 
 def report(summary: dict) -> str:
@@ -603,7 +453,3 @@ def report(summary: dict) -> str:
     )
     lines.append(f"  {summary['seconds']:.0f} s in all")
     return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    print(report(run(Config.test_size(), "results/mpc-quadcopter-test")))

@@ -26,12 +26,12 @@ with RS's spread over repeated draws, its wall time and simulated steps, and the
 bring its standard error at the threshold below a tolerance (extrapolated from the measured
 1/sqrt(N) law, and checked against the measured N).
 
-All samples come from one seeded numpy Generator.
+The probes are :mod:`drake_abs.tasks.contact_probes`, the estimators
+:mod:`drake_abs.policy.randomized_smoothing`. All samples come from one seeded numpy Generator.
 """
 
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from dataclasses import asdict, dataclass
@@ -39,17 +39,28 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.lcs import LcsStepper
 from drake_abs.contact.smoothing import Fixed
 from drake_abs.contact.unconverged import UnconvergedStepWarning
-from drake_abs.engine import open_loop
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.experiments.outputs import (
+    file_list,
+    progress,
+    pyplot,
+    results_dir,
+    save_figure,
+    write_json,
+)
 from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.policy.randomized_smoothing import gaussian_smoothed, randomized_smoothing
 from drake_abs.tasks.box_lcs import TranslatingBox
-from drake_abs.tasks.point_mass import point_mass_lcs
+from drake_abs.tasks.contact_probes import (
+    GRAVITY,
+    drop_contact_height,
+    drop_response,
+    push_response,
+    push_slope,
+)
 
 NAME = "smoothing-vs-rs"
-G = 9.81
 
 #: Absolute derivative (1/s) below which an RS estimate counts as the smooth region's zero (the
 #: exact solver's floor leaves ~1e-9; the ramp is -1/h = -500).
@@ -102,53 +113,43 @@ class Config:
             push_samples=(4, 32), push_repeats=6,
         )  # fmt: skip
 
+    def drop(self, heights, smoothing=None):
+        """:func:`~drake_abs.tasks.contact_probes.drop_response` with these settings."""
+        return drop_response(heights, drop_speed=self.drop_speed, steps=self.impact_steps,
+                             time_step=self.impact_time_step, smoothing=smoothing)  # fmt: skip
+
+    def box(self) -> TranslatingBox:
+        return TranslatingBox(friction=self.friction, time_step=self.time_step)
+
+    def push(self, forces, smoothing=None):
+        """:func:`~drake_abs.tasks.contact_probes.push_response` with these settings."""
+        return push_response(self.box(), forces, steps=self.push_steps, smoothing=smoothing)
+
+
+def _tick(bar, text: str) -> None:
+    bar.set_postfix_str(text)
+    bar.update()
+
+
+def _scalars(cases: dict) -> dict:
+    """Each case's entries without its curves (the lists)."""
+    return {k: {n: v for n, v in c.items() if not isinstance(v, list)} for k, c in cases.items()}
+
 
 # ---------------------------------------------------------------------------- (a) impact
 
 
-def contact_height(config: Config) -> float:
-    """y_c: the exact discrete model lands within the horizon iff y0 <= y_c (to within the
-    last step's ramp). Position after k free steps: y0 + k h v0 - g h^2 k (k + 1) / 2."""
-    h, T, v0 = config.impact_time_step, config.impact_steps, -config.drop_speed
-    return -(T * h * v0 - G * h * h * T * (T + 1) / 2)
-
-
-def impact_values(config: Config, heights: np.ndarray, smoothing=None) -> tuple:
-    """f(y0) = v(T) and df/dy0 for a batch of heights (B,); returns (f, df, converged)."""
-    lcs = point_mass_lcs(1, time_step=config.impact_time_step)
-    x0 = np.column_stack([heights, np.full(heights.size, -config.drop_speed)])
-    u = np.zeros((config.impact_steps, 1))
-    ro = open_loop(LcsStepper(lcs, smoothing), x0, u)
-    return ro.x[:, -1, 1], ro.dxH_dx0[:, 1, 0], ro.converged.all(axis=1)
-
-
-def _tick(bar, text: str) -> None:
-    if bar is not None:
-        bar.set_postfix_str(text)
-        bar.update()
-
-
-def _work(config: Config) -> int:
-    """The progress bar's units of the whole run: one per BS curve and per RS draw."""
-    return (
-        len(config.impact_mus)
-        + len(config.impact_samples) * config.impact_repeats
-        + len(config.friction_mus)
-        + len(config.push_samples) * config.push_repeats
-    )
-
-
-def impact_experiment(config: Config, rng: np.random.Generator, bar=None) -> dict:
-    y_c = contact_height(config)
-    ys = y_c + np.linspace(-config.height_window, config.height_window, config.heights)
-    f_gt, g_gt, conv = impact_values(config, ys)
-    jump = float(f_gt[-1] - f_gt[0])  # f(above) - f(below): the impulse's mass
+def impact_experiment(config: Config, rng: np.random.Generator, bar) -> dict:
+    y_c = drop_contact_height(config.drop_speed, config.impact_steps, config.impact_time_step)
+    window = config.height_window
+    ys = y_c + np.linspace(-window, window, config.heights)
+    f_gt, g_gt, conv = config.drop(ys)
     dy = ys[1] - ys[0]
-    out = {"y": ys.tolist(), "y_c": y_c, "jump": jump, "gt": g_gt.tolist(), "gt_mass": None,
-           "gt_value": f_gt.tolist(), "unconverged": int((~conv).sum()), "bs": {}, "rs_fo": {},
-           "rs_zo": {}}  # fmt: skip
+    out = {"y": ys.tolist(), "y_c": y_c, "jump": float(f_gt[-1] - f_gt[0]), "gt": g_gt.tolist(),
+           "gt_mass": None, "gt_value": f_gt.tolist(), "unconverged": int((~conv).sum()),
+           "bs": {}, "rs_fo": {}, "rs_zo": {}}  # fmt: skip
     for mu in config.impact_mus:
-        f, g, conv = impact_values(config, ys, Fixed(mu))
+        f, g, conv = config.drop(ys, Fixed(mu))
         out["unconverged"] += int((~conv).sum())
         out["bs"][f"{mu:g}"] = {
             "grad": g.tolist(),
@@ -161,27 +162,23 @@ def impact_experiment(config: Config, rng: np.random.Generator, bar=None) -> dic
     # RS on a coarser grid of heights (all samples of all heights in one batch per draw). The
     # expectation of both RS estimators is the GT convolved with the Gaussian, computed on a
     # fine grid; RS's bias against the GT is that convolution minus the GT (predictable).
-    fine = y_c + np.linspace(-config.height_window - 5 * config.impact_sigma,
-                             config.height_window + 5 * config.impact_sigma,
-                             config.fine_heights)  # fmt: skip
-    _, g_fine, _ = impact_values(config, fine)
+    sigma = config.impact_sigma
+    fine = y_c + np.linspace(-window - 5 * sigma, window + 5 * sigma, config.fine_heights)
+    _, g_fine, _ = config.drop(fine)
     out["gt_mass"] = float(np.sum(g_fine) * (fine[1] - fine[0]))
-    yr = y_c + np.linspace(-config.height_window, config.height_window, config.rs_heights)
-    f_r, g_r, _ = impact_values(config, yr)
-    kernel = np.exp(-0.5 * ((yr[:, None] - fine[None]) / config.impact_sigma) ** 2)
-    expected = (kernel * g_fine).sum(axis=1) / kernel.sum(axis=1)
+    yr = y_c + np.linspace(-window, window, config.rs_heights)
+    f_r, g_r, _ = config.drop(yr)
+    expected = gaussian_smoothed(yr, fine, g_fine, sigma)
     out.update(y_rs=yr.tolist(), gt_rs=g_r.tolist(), rs_expected=expected.tolist())
-    near = np.abs(yr - y_c) < config.impact_sigma
+    near = np.abs(yr - y_c) < sigma
     for N in config.impact_samples:
         fo, zo, seconds = [], [], 0.0
         for _ in range(config.impact_repeats):
-            w = config.impact_sigma * rng.standard_normal((yr.size, N))
             start = time.perf_counter()
-            f_s, g_s, _ = impact_values(config, (yr[:, None] + w).ravel())
+            est = randomized_smoothing(config.drop, yr, sigma, N, rng, values_at=f_r)
             seconds += time.perf_counter() - start
-            f_s, g_s = f_s.reshape(yr.size, N), g_s.reshape(yr.size, N)
-            fo.append(g_s.mean(axis=1))
-            zo.append(((f_s - f_r[:, None]) * w).mean(axis=1) / config.impact_sigma**2)
+            fo.append(est.first_order)
+            zo.append(est.zeroth_order)
             _tick(bar, f"impact, RS N = {N}")
         for key, est in (("rs_fo", np.array(fo)), ("rs_zo", np.array(zo))):
             mean, std = est.mean(axis=0), est.std(axis=0)
@@ -203,34 +200,21 @@ def impact_experiment(config: Config, rng: np.random.Generator, bar=None) -> dic
 # ---------------------------------------------------------------------------- (b) friction
 
 
-def push_gradients(config: Config, pushes: np.ndarray, contact=None) -> tuple:
-    """Final position of the box pushed by each force (B,) and its derivative; converged.
-
-    A push whose rollout took an unconverged step has a NaN derivative (the rollout's
-    ``on_unconverged="drop"``): its Jacobians are not the model's and are not reported."""
-    box = TranslatingBox(friction=config.friction, time_step=config.time_step)
-    x0 = np.tile(box.resting_state(), (pushes.size, 1))
-    u = np.repeat(pushes[:, None, None], config.push_steps, axis=1)
-    ro = open_loop(LcsStepper(box.lcs, box.smoothing(contact)), x0, u)
-    return ro.x[:, -1, 0], ro.dxH_du[:, :, 0, 0].sum(axis=1), ro.converged.all(axis=1)
-
-
-def friction_experiment(config: Config, rng: np.random.Generator, bar=None) -> dict:
-    box = TranslatingBox(friction=config.friction, time_step=config.time_step)
-    u_c = box.friction * box.mass * G
+def friction_experiment(config: Config, rng: np.random.Generator, bar) -> dict:
+    """The pushed box's gradient by the exact model, BS and first-order RS. A push whose rollout
+    took an unconverged step has a NaN derivative (not the model's; BS reports it as None)."""
+    box = config.box()
+    u_c = box.friction * box.mass * GRAVITY
     us = u_c + np.linspace(-config.push_window, config.push_window, config.pushes)
     start = time.perf_counter()
-    _, g_gt, conv = push_gradients(config, us)
-    t_gt = time.perf_counter() - start
-    T, h = config.push_steps, config.time_step
-    slope = h * h * T * (T + 1) / 2 / box.mass  # d p_T / du while sliding
+    _, g_gt, conv = config.push(us)
+    T, n, slope = config.push_steps, us.size, push_slope(box, config.push_steps)
     out = {"u": us.tolist(), "u_c": u_c, "slope": slope, "gt": g_gt.tolist(),
            "unconverged": int((~conv).sum()), "bs": {}, "rs": {},
-           "seconds_exact_all_pushes": t_gt}  # fmt: skip
-    n = us.size
+           "seconds_exact_all_pushes": time.perf_counter() - start}  # fmt: skip
     for mu in config.friction_mus:
         start = time.perf_counter()
-        _, g, conv = push_gradients(config, us, Fixed(mu))
+        _, g, conv = config.push(us, Fixed(mu))
         seconds = time.perf_counter() - start
         out["unconverged"] += int((~conv).sum())
         err = np.abs(g - g_gt)[conv]
@@ -248,12 +232,11 @@ def friction_experiment(config: Config, rng: np.random.Generator, bar=None) -> d
     for N in config.push_samples:
         est, seconds = [], 0.0
         for _ in range(config.push_repeats):
-            w = config.push_sigma * rng.standard_normal((n, N))
             start = time.perf_counter()
-            _, g_s, conv = push_gradients(config, (us[:, None] + w).ravel())
+            draw = randomized_smoothing(config.push, us, config.push_sigma, N, rng)
             seconds += time.perf_counter() - start
-            out["unconverged"] += int((~conv).sum())
-            est.append(g_s.reshape(n, N).mean(axis=1))
+            out["unconverged"] += int((~draw.converged).sum())
+            est.append(draw.first_order)
             _tick(bar, f"friction, RS N = {N}")
         est = np.array(est)
         out["rs"][str(N)] = {
@@ -294,17 +277,34 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     out = results_dir(NAME, out)
     rng = np.random.default_rng(config.seed)
     start = time.perf_counter()
-    bar = progress(total=_work(config), desc=NAME)
+    draws = len(config.impact_samples) * config.impact_repeats
+    draws += len(config.push_samples) * config.push_repeats
+    work = len(config.impact_mus) + len(config.friction_mus) + draws
+    bar = progress(total=work, desc=NAME)  # one unit per BS curve and per RS draw
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted in "unconverged"
         warnings.simplefilter("ignore", UnconvergedStepWarning)  # and "converged_pushes"
         impact = impact_experiment(config, rng, bar)
         friction = friction_experiment(config, rng, bar)
     bar.close()
+    keep = ("peak_y", "mass", "max_abs_error_away")
     summary = {
         "config": asdict(config),
-        "impact": _impact_summary(config, impact),
-        "friction": _friction_summary(config, friction),
+        "impact": {
+            **{k: impact[k] for k in ("y_c", "jump", "gt_mass", "unconverged")},
+            "bs": {mu: {k: b[k] for k in keep} for mu, b in impact["bs"].items()},
+            "rs_fo": _scalars(impact["rs_fo"]),
+            "rs_zo": _scalars(impact["rs_zo"]),
+        },
+        "friction": {
+            **{k: friction[k] for k in ("u_c", "slope", "unconverged")},
+            "bs": {
+                mu: {k: v for k, v in b.items() if k != "grad"} for mu, b in friction["bs"].items()
+            },  # fmt: skip
+            "rs": _scalars(friction["rs"]),
+            "rs_cost_for_tolerance": friction["rs_cost_for_tolerance"],
+            "bs_seconds_per_gradient": friction["bs_seconds_per_gradient"],
+        },
         "seconds": time.perf_counter() - start,
     }
     summary["claims"] = _claims(summary)
@@ -313,89 +313,50 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         "figure6": out / "figure6.png", "rs_cost": out / "rs_cost.png",
         "curves": out / "curves.json", "summary": out / "summary.json",
     })  # fmt: skip
-    (out / "curves.json").write_text(json.dumps({"impact": impact, "friction": friction}))
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    _plot(out, config, impact, friction)
+    write_json(out / "curves.json", {"impact": impact, "friction": friction}, indent=None)
+    write_json(out / "summary.json", summary)
+    _plot(out, impact, friction)
     return summary
-
-
-def _impact_summary(config: Config, impact: dict) -> dict:
-    keep = ("peak_y", "mass", "max_abs_error_away")
-    return {
-        "y_c": impact["y_c"],
-        "jump": impact["jump"],
-        "gt_mass": impact["gt_mass"],
-        "unconverged": impact["unconverged"],
-        "bs": {mu: {k: b[k] for k in keep} for mu, b in impact["bs"].items()},
-        "rs_fo": {N: {k: v for k, v in r.items() if not isinstance(v, list)}
-                  for N, r in impact["rs_fo"].items()},
-        "rs_zo": {N: {k: v for k, v in r.items() if not isinstance(v, list)}
-                  for N, r in impact["rs_zo"].items()},
-    }  # fmt: skip
-
-
-def _friction_summary(config: Config, friction: dict) -> dict:
-    return {
-        "u_c": friction["u_c"],
-        "slope": friction["slope"],
-        "unconverged": friction["unconverged"],
-        "bs": {mu: {k: v for k, v in b.items() if k != "grad"} for mu, b in friction["bs"].items()},
-        "rs": {N: {k: v for k, v in r.items() if not isinstance(v, list)}
-               for N, r in friction["rs"].items()},
-        "rs_cost_for_tolerance": friction["rs_cost_for_tolerance"],
-        "bs_seconds_per_gradient": friction["bs_seconds_per_gradient"],
-    }  # fmt: skip
 
 
 def _claims(summary: dict) -> dict:
     imp, fr = summary["impact"], summary["friction"]
-    jump = imp["jump"]
-    sigma = summary["config"]["impact_sigma"]
+    jump, sigma = imp["jump"], summary["config"]["impact_sigma"]
     smallest_mu = min(imp["bs"], key=float)
     b = imp["bs"][smallest_mu]
-    bs_ok = abs(b["mass"] - jump) < 0.1 * abs(jump) and abs(b["peak_y"] - imp["y_c"]) < sigma
     smallest = min(imp["rs_fo"], key=int)
-    rs_small = imp["rs_fo"][smallest]
+    zero = imp["rs_fo"][smallest]["fraction_zero_near_contact"]
     tol = min(fr["rs_cost_for_tolerance"], key=float)
     cost = fr["rs_cost_for_tolerance"][tol]
-    return {
-        "bs_approximates_impulse": {
-            "paper": PAPER_CLAIMS["bs_approximates_impulse"],
-            "ours": f"BS mu={smallest_mu}: peak {b['peak_y'] - imp['y_c']:+.4f} m from y_c, mass "
+    ours = {
+        "bs_approximates_impulse": (
+            f"BS mu={smallest_mu}: peak {b['peak_y'] - imp['y_c']:+.4f} m from y_c, mass "
             f"{b['mass']:.3f} vs the jump {jump:.3f} m/s (larger mu: see the table)",
-            "agree": bool(bs_ok),
-        },
-        "rs_constant_biased": {
-            "paper": PAPER_CLAIMS["rs_constant_biased"],
-            "ours": f"first-order RS with N = {smallest}: "
-            f"{100 * rs_small['fraction_zero_near_contact']:.0f}% of the estimates within one "
+            abs(b["mass"] - jump) < 0.1 * abs(jump) and abs(b["peak_y"] - imp["y_c"]) < sigma,
+        ),
+        "rs_constant_biased": (
+            f"first-order RS with N = {smallest}: {100 * zero:.0f}% of the estimates within one "
             "sigma of contact are the constant 0 (every sample missed the impulse); its "
             "expectation is the smoothed GT, so the bias is empirical (finite N)",
-            "agree": bool(rs_small["fraction_zero_near_contact"] > 0.5),
-        },
-        "rs_noisy_costly": {
-            "paper": PAPER_CLAIMS["rs_noisy_costly"],
-            "ours": f"RS needs N = {cost['samples']} rollouts ({cost['simulated_steps']} steps, "
+            zero > 0.5,
+        ),
+        "rs_noisy_costly": (
+            f"RS needs N = {cost['samples']} rollouts ({cost['simulated_steps']} steps, "
             f"~{cost['seconds_estimated']:.3g} s) for a standard error of {tol} x slope at the "
             f"threshold; BS: 1 rollout ({summary['config']['push_steps']} steps, "
             f"{fr['bs_seconds_per_gradient']:.2g} s), deterministic",
-            "agree": bool(cost["samples"] > 10),
-        },
+            cost["samples"] > 10,
+        ),
     }
+    return {key: {"paper": PAPER_CLAIMS[key], "ours": text, "agree": bool(agree)}
+            for key, (text, agree) in ours.items()}  # fmt: skip
 
 
-def _plot(out: Path, config: Config, impact: dict, friction: dict) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(13, 4.5))
-    ax = axes[0]
-    y = np.array(impact["y"])
-    ax.plot(y, impact["gt"], "k", lw=2, label="exact (ground truth)")
+def _plot(out: Path, impact: dict, friction: dict) -> None:
+    fig, (ax, bx) = pyplot().subplots(1, 2, figsize=(13, 4.5))
+    ax.plot(impact["y"], impact["gt"], "k", lw=2, label="exact (ground truth)")
     for mu, b in impact["bs"].items():
-        ax.plot(y, b["grad"], label=f"barrier smoothing, mu = {mu}")
+        ax.plot(impact["y"], b["grad"], label=f"barrier smoothing, mu = {mu}")
     for N, r in impact["rs_fo"].items():
         ax.plot(impact["y_rs"], r["first_draw"], "o:", ms=3,
                 label=f"randomised smoothing (first order), N = {N}, one draw")  # fmt: skip
@@ -404,41 +365,36 @@ def _plot(out: Path, config: Config, impact: dict, friction: dict) -> None:
     ax.set(xlabel="initial height y0 (m)", ylabel="d v_y(T) / d y0  (1/s)",
            title="(a) impact: derivative of the post-impact velocity")  # fmt: skip
     ax.set_yscale("symlog", linthresh=1.0)
-    ax.legend(fontsize=7)
-    ax = axes[1]
     u = np.array(friction["u"])
-    ax.plot(u, friction["gt"], "k", lw=2, label="exact (ground truth)")
+    bx.plot(u, friction["gt"], "k", lw=2, label="exact (ground truth)")
     for mu, b in friction["bs"].items():
         g = np.array([np.nan if v is None else v for v in b["grad"]])  # gaps: unconverged
-        ax.plot(u, g, label=f"barrier smoothing, mu = {mu} "
+        bx.plot(u, g, label=f"barrier smoothing, mu = {mu} "
                 f"({b['converged_pushes']}/{b['pushes']} pushes converged)")  # fmt: skip
     for N, r in friction["rs"].items():
         mean, std = np.array(r["first_draw"]), np.array(r["std"])
-        line = ax.plot(u, mean, ":", label=f"randomised smoothing, N = {N} (one draw, +-std band)")[
-            0
-        ]
-        ax.fill_between(u, mean - std, mean + std, color=line.get_color(), alpha=0.15)
-    ax.set(xlabel="push force u (N)", ylabel="d p_x(T) / d u  (m/N)",
+        (line,) = bx.plot(
+            u, mean, ":", label=f"randomised smoothing, N = {N} (one draw, +-std band)"
+        )
+        bx.fill_between(u, mean - std, mean + std, color=line.get_color(), alpha=0.15)
+    bx.set(xlabel="push force u (N)", ylabel="d p_x(T) / d u  (m/N)",
            title="(b) frictional box: gradient of the final position")  # fmt: skip
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "figure6.png", dpi=120)
-    plt.close(fig)
+    bx.legend(fontsize=7)
+    save_figure(fig, out / "figure6.png")
 
-    fig, ax = plt.subplots(figsize=(6, 4.2))
+    fig, ax = pyplot().subplots(figsize=(6, 4.2))
     Ns = [int(N) for N in friction["rs"]]
-    stds = [friction["rs"][str(N)]["std_at_threshold"] for N in Ns]
-    secs = [friction["rs"][str(N)]["seconds_per_gradient"] for N in Ns]
-    ax.loglog(Ns, stds, "o-", label="randomised smoothing: std at the threshold (m/N)")
-    ax.loglog(Ns, secs, "s-", label="randomised smoothing: seconds per gradient")
+    for key, marker, what in (("std_at_threshold", "o-", "std at the threshold (m/N)"),
+                              ("seconds_per_gradient", "s-", "seconds per gradient")):  # fmt: skip
+        ax.loglog(Ns, [friction["rs"][str(N)][key] for N in Ns], marker,
+                  label=f"randomised smoothing: {what}")  # fmt: skip
     ax.axhline(friction["bs_seconds_per_gradient"], color="C1", ls="--",
                label="barrier smoothing: seconds per gradient (std 0)")  # fmt: skip
     ax.set(xlabel="randomised-smoothing samples N",
            title="(b) sampling cost of randomised smoothing")  # fmt: skip
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "rs_cost.png", dpi=120)
-    plt.close(fig)
+    save_figure(fig, out / "rs_cost.png")
 
 
 def report(summary: dict) -> str:
@@ -476,7 +432,3 @@ def report(summary: dict) -> str:
         lines.append(f"  paper: {c['paper']} -> ours: {c['ours']} -> "
                      f"{'agree' if c['agree'] else 'DIFFERENT'}")  # fmt: skip
     return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    print(report(run(Config.test_size(), "results/smoothing-vs-rs-test")))
