@@ -21,21 +21,16 @@ against a central difference and a secant. ``comparison.md`` explains why they d
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from drake_abs.experiments.outputs import file_list, progress, results_dir  # noqa: E402
-from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy  # noqa: E402
-from drake_abs.reference import comparison_scenes as cs  # noqa: E402
-from drake_abs.reference.drake_twin import APPROXIMATION_LABELS  # noqa: E402
+from drake_abs.experiments import outputs
+from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
+from drake_abs.reference import comparison_scenes as cs
+from drake_abs.reference.drake_twin import APPROXIMATION_LABELS
 
 NAME = "drake-comparison"
 OURS = ("exact", "bs", "abs")
@@ -131,58 +126,6 @@ def roll(stepper, x0, u, steps: int, jacobians: bool = False):
     return traj, (time.perf_counter() - start) / max(steps, 1)
 
 
-# ----------------------------------------------------------------------------------------------
-# Metrics
-
-
-def analytic_slide(config: Config, time_step: float) -> dict:
-    """The box's Coulomb slide over ``box_duration``: continuous and discrete (module doc), with
-    deceleration ``a = mu g - u / m`` (m = 1 kg); None if the push overcomes friction."""
-    a = config.friction * cs.GRAVITY - config.box_push / 1.0
-    if a <= 0:
-        return {"continuous_m": None, "discrete_m": None}
-    v0, dv, T = config.box_speed, a * time_step, config.box_duration
-    k = np.arange(1, min(int(np.floor(v0 / dv)), _steps(T, time_step)) + 1)
-    t = min(T, v0 / a)
-    discrete = float(time_step * np.sum(v0 - dv * k))
-    return {"continuous_m": v0 * t - a * t**2 / 2, "discrete_m": discrete, "deceleration_mps2": a}
-
-
-def box_metrics(xs: np.ndarray, x0: np.ndarray, analytic: dict) -> dict:
-    z, pitch, (a, c) = xs[:, 1], xs[:, 2], cs.BOX_HALF  # the two bottom edges' heights:
-    corners = np.stack([z - s * a * np.sin(pitch) - c * np.cos(pitch) for s in (-1.0, 1.0)], 1)
-    slide = float(xs[-1, 0] - x0[0])
-    out = {
-        "slide_m": slide,
-        "max_penetration_m": float(max(0.0, -corners.min())),
-        "rest_penetration_before_push_m": float(max(0.0, -corners[0].min())),
-        "hop_m": float(np.max(xs[:, 1]) - x0[1]),
-        "final": {"x_m": float(xs[-1, 0]), "z_m": float(xs[-1, 1]), "pitch_rad": float(xs[-1, 2]),
-                  "speed_mps": float(np.linalg.norm(xs[-1, 3:]))},
-    }  # fmt: skip
-    for key in ("continuous", "discrete"):
-        ref = analytic.get(f"{key}_m")
-        out[f"rel_err_vs_{key}"] = None if ref is None else (slide - ref) / ref
-    return out
-
-
-def ball_metrics(xs: np.ndarray) -> dict:
-    # x = (x, y, z, yaw, pitch, roll, their rates); rolling about x: only roll turns
-    phi, vz = xs[:, 2] - cs.BALL_RADIUS, xs[:, 8]
-    going_up = np.flatnonzero((vz[1:] >= 0) & (vz[:-1] < 0))  # the first impact step
-    impact = int(going_up[0]) + 1 if going_up.size else len(xs) - 1
-    vy, wx = xs[-1, 7], xs[-1, 11]
-    return {
-        "max_penetration_m": float(max(0.0, -phi.min())),
-        "impact_step": impact,
-        "rebound_height_m": float(phi[impact:].max()),
-        "rest_height_m": float(phi[-1]),
-        "final": {"y_m": float(xs[-1, 1]), "vy_mps": float(vy), "vz_mps": float(vz[-1]),
-                  "roll_rate_radps": float(wx),
-                  "slip_mps": float(vy + cs.BALL_RADIUS * wx)},  # contact point velocity along y
-    }  # fmt: skip
-
-
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
     """||a - b|| / ||b|| (Frobenius)."""
     nb = np.linalg.norm(b)
@@ -205,11 +148,11 @@ def simulate_scene(scene: str, h: float, config: Config, *, gradients: bool,
     +-``config.secant_fraction`` of the initial speed (the slope at the scale of the motion)."""
     x_init, u, duration = config.start(scene)
     n = _steps(duration, h)
-    analytic = analytic_slide(config, h) if scene == "box" else None
+    analytic = config.coulomb_slide(h) if scene == "box" else None
     slope_name, row, col = SLOPE[scene]
     results = {}
     models = steppers(scene, h, config, ours)
-    bar = progress(models.items(), total=len(models), desc=f"{scene}, h = {h:g} s: models")
+    bar = outputs.progress(models.items(), total=len(models), desc=f"{scene}, h = {h:g} s: models")
     for name, stepper in bar:
         bar.set_postfix_str(label(name))
         x0 = x_init.copy()
@@ -242,7 +185,8 @@ def simulate_scene(scene: str, h: float, config: Config, *, gradients: bool,
                 "secant": float((final(wide) - final(-wide)) / (2 * wide)),
                 "fd_step": eps, "secant_half_width": wide,
             }  # fmt: skip
-        entry["metrics"] = box_metrics(xs, x0, analytic) if scene == "box" else ball_metrics(xs)
+        entry["metrics"] = (cs.box_metrics(xs, x0, analytic) if scene == "box"
+                            else cs.ball_metrics(xs))  # fmt: skip
         results[name] = entry
     return {"time_step": h, "steps": n, "analytic": analytic, "models": results}
 
@@ -271,31 +215,27 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     trajectories.png and gradients.png to ``out`` (default results/drake-comparison); return
     the summary."""
     config = config or Config()
-    out = results_dir(NAME, out)
-    jobs = [
-        (s, k) for s in cs.SCENES for k in ("coarse", "fine")[: 1 + bool(config.fine_time_step)]
-    ]
+    out = outputs.results_dir(NAME, out)
+    steps = ("coarse", "fine")[: 1 + bool(config.fine_time_step)]
     runs = {scene: {} for scene in cs.SCENES}
-    for scene, step in progress(jobs, desc=f"{NAME}: scenes"):
-        runs[scene][step] = (
-            simulate_scene(scene, config.time_step, config, gradients=True)
-            if step == "coarse"
-            else simulate_scene(scene, config.fine_time_step, config, gradients=False,
-                                ours=config.fine_ours)
-        )  # fmt: skip
+    jobs = [(scene, step) for scene in cs.SCENES for step in steps]
+    for scene, step in outputs.progress(jobs, desc=f"{NAME}: scenes"):
+        coarse = step == "coarse"
+        h = config.time_step if coarse else config.fine_time_step
+        runs[scene][step] = simulate_scene(scene, h, config, gradients=coarse,
+                                           ours=coarse or config.fine_ours)  # fmt: skip
     summary = {"config": asdict(config), "scenes": {}, "timings": {}}
     for scene, by_step in runs.items():
         s = summary["scenes"][scene] = {}
         for step, res in by_step.items():
             models = res["models"]
             s[step] = {
-                "time_step": res["time_step"],
-                "steps": res["steps"],
+                "time_step": res["time_step"], "steps": res["steps"],
                 **({"analytic": res["analytic"]} if res["analytic"] else {}),
                 "metrics": {k: m["metrics"] for k, m in models.items()},
                 "x0": {k: m["x0"].tolist() for k, m in models.items()},
                 "converged": {k: m["converged"] for k, m in models.items()},
-            }
+            }  # fmt: skip
         s["gradients"] = _gradient_summary(scene, by_step["coarse"], config)
         summary["timings"][scene] = {
             step: {k: {key: m[key] for key in ("seconds_per_step", "gradient_seconds_per_step")
@@ -310,28 +250,59 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     }
     (out / "comparison.md").write_text(report(summary))
     summary["folder"] = str(out)
-    summary["files"] = file_list(files)
-    finite = json.loads(json.dumps(summary), parse_constant=lambda _: None)  # NaN, inf: null
-    (out / "comparison.json").write_text(json.dumps(finite, indent=2))
+    summary["files"] = outputs.file_list(files)
+    outputs.write_json(out / "comparison.json", summary, finite=True)  # NaN, inf: null
     return summary
 
 
 # ----------------------------------------------------------------------------------------------
 # Report
 
+# each scene's trajectory table: (header, metric ("final.<key>": of the final state), format)
+COLUMNS = {
+    "box": [("slide (m)", "slide_m", ".5f"), ("vs continuous", "rel_err_vs_continuous", "%"),
+            ("vs discrete", "rel_err_vs_discrete", "%"),
+            ("rest penetration (m)", "rest_penetration_before_push_m", ".1e"),
+            ("max penetration (m)", "max_penetration_m", ".1e"), ("hop (m)", "hop_m", ".1e"),
+            ("final z (m)", "final.z_m", ".6f"), ("final pitch (rad)", "final.pitch_rad", "+.1e"),
+            ("final speed (m/s)", "final.speed_mps", ".1e")],
+    "ball": [("max penetration (m)", "max_penetration_m", ".2e"),
+             ("rebound height (m)", "rebound_height_m", "+.2e"),
+             ("rest height (m)", "rest_height_m", "+.2e"),
+             ("final v_y (m/s)", "final.vy_mps", ".4f"),
+             ("final v_z (m/s)", "final.vz_mps", "+.1e"), ("slip (m/s)", "final.slip_mps", "+.1e")],
+}  # fmt: skip
 
-def _fmt(x, spec="{:.5f}") -> str:
-    return "n/a" if x is None else spec.format(x)
+
+def _cell(metrics: dict, key: str, spec: str) -> str:
+    for part in key.split("."):
+        metrics = metrics[part]
+    if metrics is None:
+        return "n/a"
+    return f"{100 * metrics:+.2f}%" if spec == "%" else format(metrics, spec)
 
 
-def _pct(x) -> str:
-    return "n/a" if x is None else f"{100 * x:+.2f}%"
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
-        "| " + " | ".join(r) + " |" for r in rows
-    ]
+def _intro(scene: str, step: str, res: dict, c: dict) -> list[str]:
+    """The heading and the paragraph above a scene's trajectory table."""
+    h = f"h = {res['time_step']:g} s"
+    if scene == "ball":
+        return [f"## Ball throw, {h} ({res['steps']} steps)", "",
+                f"Centre dropped from {c['ball_height']:g} m at {c['ball_speed']:g} m/s along y. "
+                "Rebound: the highest ground clearance after the first impact step; rest: the "
+                "clearance at the end (negative: penetration); slip: the contact point's velocity. "
+                f"Rolling without slip after the impact: v_y = 5/7 v_0 = "
+                f"{5 / 7 * c['ball_speed']:.4f} m/s.", ""]  # fmt: skip
+    a = {k: "n/a" if v is None else f"{v:.5f}" for k, v in (res.get("analytic") or {
+        "continuous_m": None, "discrete_m": None}).items()}  # fmt: skip
+    creep = (" BS/ABS mu are scaled by h / time_step here (the normal barrier then acts at "
+             "the same distance); friction rows use mu / h, so BS's friction is softened up "
+             "to a slip speed ten times larger and the box creeps on.")  # fmt: skip
+    return [f"## Box slide, {h} ({res['steps']} steps after the push)", "",
+            f"Pushed off at {c['box_speed']:g} m/s with u = {c['box_push']:g} N from each "
+            f"model's rest state. Coulomb: continuous {a['continuous_m']} m, discrete "
+            f"{a['discrete_m']} m. Hop: the highest rise of the centre above its rest "
+            "height." + (creep if step == "fine" and "bs" in res["metrics"] else ""),
+            ""]  # fmt: skip
 
 
 def report(summary: dict) -> str:
@@ -352,99 +323,47 @@ def report(summary: dict) -> str:
         "the 'total' mode.",
         "",
     ]
-    for step, box in ((k, summary["scenes"]["box"].get(k)) for k in ("coarse", "fine")):
-        if box is None:
-            continue
-        a = box.get("analytic") or {"continuous_m": None, "discrete_m": None}
-        creep = (" BS/ABS mu are scaled by h / time_step here (the normal barrier then acts at "
-                 "the same distance); friction rows use mu / h, so BS's friction is softened up "
-                 "to a slip speed ten times larger and the box creeps on.")  # fmt: skip
-        lines += [
-            f"## Box slide, h = {box['time_step']:g} s ({box['steps']} steps after the push)",
-            "",
-            f"Pushed off at {c['box_speed']:g} m/s with u = {c['box_push']:g} N from each "
-            f"model's rest state. Coulomb: continuous {_fmt(a['continuous_m'])} m, discrete "
-            f"{_fmt(a['discrete_m'])} m. Hop: the highest rise of the centre above its rest "
-            "height." + (creep if step == "fine" and "bs" in box["metrics"] else ""),
-            "",
-        ]
-        rows = [[label(k), f"{m['slide_m']:.5f}", _pct(m["rel_err_vs_continuous"]),
-                 _pct(m["rel_err_vs_discrete"]), f"{m['rest_penetration_before_push_m']:.1e}",
-                 f"{m['max_penetration_m']:.1e}", f"{m['hop_m']:.1e}", f"{m['final']['z_m']:.6f}",
-                 f"{m['final']['pitch_rad']:+.1e}", f"{m['final']['speed_mps']:.1e}",
-                 f"{1e3 * t['box'][step][k]['seconds_per_step']:.3f}"]
-                for k, m in box["metrics"].items()]  # fmt: skip
-        lines += _table(["model", "slide (m)", "vs continuous", "vs discrete",
-                         "rest penetration (m)", "max penetration (m)", "hop (m)", "final z (m)",
-                         "final pitch (rad)", "final speed (m/s)", "ms/step"], rows)  # fmt: skip
-        lines.append("")
-    for step, ball in ((k, summary["scenes"]["ball"].get(k)) for k in ("coarse", "fine")):
-        if ball is None:
-            continue
-        lines += [
-            f"## Ball throw, h = {ball['time_step']:g} s ({ball['steps']} steps)",
-            "",
-            f"Centre dropped from {c['ball_height']:g} m at {c['ball_speed']:g} m/s along y. "
-            "Rebound: the highest ground clearance after the first impact step; rest: the "
-            "clearance at the end (negative: penetration); slip: the contact point's velocity. "
-            f"Rolling without slip after the impact: v_y = 5/7 v_0 = "
-            f"{5 / 7 * c['ball_speed']:.4f} m/s.",
-            "",
-        ]
-        rows = [[label(k), f"{m['max_penetration_m']:.2e}", f"{m['rebound_height_m']:+.2e}",
-                 f"{m['rest_height_m']:+.2e}", f"{m['final']['vy_mps']:.4f}",
-                 f"{m['final']['vz_mps']:+.1e}", f"{m['final']['slip_mps']:+.1e}",
-                 f"{1e3 * t['ball'][step][k]['seconds_per_step']:.3f}"]
-                for k, m in ball["metrics"].items()]  # fmt: skip
-        lines += _table(["model", "max penetration (m)", "rebound height (m)", "rest height (m)",
-                         "final v_y (m/s)", "final v_z (m/s)", "slip (m/s)", "ms/step"],
-                        rows) + [""]  # fmt: skip
+    for scene in cs.SCENES:
+        for step in ("coarse", "fine"):
+            if (res := summary["scenes"][scene].get(step)) is None:
+                continue
+            rows = [[label(k), *(_cell(m, key, spec) for _, key, spec in COLUMNS[scene]),
+                     f"{1e3 * t[scene][step][k]['seconds_per_step']:.3f}"]
+                    for k, m in res["metrics"].items()]  # fmt: skip
+            header = ["model", *(head for head, _, _ in COLUMNS[scene]), "ms/step"]
+            lines += _intro(scene, step, res, c) + outputs.markdown_table(header, rows) + [""]
     for scene in cs.SCENES:
         g, res = summary["scenes"][scene]["gradients"], summary["scenes"][scene]["coarse"]
         u_name = "u = push (N)" if scene == "box" else "u = initial v_y (m/s)"
         names = [n for n, _, _ in KEY_ENTRIES[scene]]
-        lines += [
-            f"## Gradients, {scene}, h = {res['time_step']:g} s, "
-            f"T = {res['steps'] * res['time_step']:g} s ({u_name})",
-            "",
-            "Both by the engine's reverse pass over one-step Jacobians: Drake's from AutoDiffXd "
-            "through the converted diagram, ours implicit.",
-            "",
-        ]
         ms = {k: v.get("gradient_seconds_per_step") for k, v in t[scene]["coarse"].items()}
-        rows = [[label(k)] + [f"{e[n]:+.4g}" if n in e else "n/a" for n in names]
-                + ["" if ms.get(k) is None else f"{1e3 * ms[k]:.3f}"]
-                for k, e in g["entries"].items()]  # fmt: skip
-        lines += _table(["model", *names, "gradient ms/step"], rows)
         first = next(iter(g["slope"].values()))
-        lines += [
-            "",
-            f"Is the rollout smooth there? {first['name']} from the gradient, a central "
-            f"difference (step {first['fd_step']:g} m/s) and a secant over +-"
-            f"{first['secant_half_width']:g} m/s:",
-            "",
-        ]
-        lines += _table(["model", "gradient", "central difference", "secant"], [
-            [label(k), f"{v['gradient']:+.5g}", f"{v['central_difference']:+.5g}",
-             f"{v['secant']:+.5g}"] for k, v in g["slope"].items()])  # fmt: skip
-        lines += [
-            "",
-            "Relative difference ||J_ours - J_Drake|| / ||J_Drake|| (Frobenius) of "
-            "d x_T / d x_0, of its velocity columns d x_T / d v_0, and of d x_T / d u:",
-            "",
-        ]
-        lines += _table(["ours \\ Drake", *map(label, DRAKE)], [
-            [label(o)] + [f"{r[d]['dx_dx0']:.3g} / {r[d]['dx_dv0']:.3g} / {r[d]['dx_du']:.3g}"
-                          for d in DRAKE]
-            for o, r in g["relative_difference"].items()])  # fmt: skip
         dd = g["drake_vs_drake"]
         pairs = (("sap", "similar"), ("sap", "lagged"), ("similar", "lagged"))
-        between = ", ".join(f"{a} vs {b}: {dd[a][b]:.3g}" for a, b in pairs)
         lines += [
-            "",
-            f"Between Drake's approximations ([d x_T / d x_0, d x_T / d u]): {between}.",
-            "",
-        ]
+            f"## Gradients, {scene}, h = {res['time_step']:g} s, "
+            f"T = {res['steps'] * res['time_step']:g} s ({u_name})", "",
+            "Both by the engine's reverse pass over one-step Jacobians: Drake's from AutoDiffXd "
+            "through the converted diagram, ours implicit.", "",
+            *outputs.markdown_table(["model", *names, "gradient ms/step"], [
+                [label(k), *(f"{e[n]:+.4g}" if n in e else "n/a" for n in names),
+                 "" if ms.get(k) is None else f"{1e3 * ms[k]:.3f}"]
+                for k, e in g["entries"].items()]), "",
+            f"Is the rollout smooth there? {first['name']} from the gradient, a central "
+            f"difference (step {first['fd_step']:g} m/s) and a secant over +-"
+            f"{first['secant_half_width']:g} m/s:", "",
+            *outputs.markdown_table(["model", "gradient", "central difference", "secant"], [
+                [label(k), *(f"{v[x]:+.5g}" for x in ("gradient", "central_difference", "secant"))]
+                for k, v in g["slope"].items()]), "",
+            "Relative difference ||J_ours - J_Drake|| / ||J_Drake|| (Frobenius) of "
+            "d x_T / d x_0, of its velocity columns d x_T / d v_0, and of d x_T / d u:", "",
+            *outputs.markdown_table(["ours \\ Drake", *map(label, DRAKE)], [
+                [label(o), *(f"{r[d]['dx_dx0']:.3g} / {r[d]['dx_dv0']:.3g} / {r[d]['dx_du']:.3g}"
+                             for d in DRAKE)]
+                for o, r in g["relative_difference"].items()]), "",
+            "Between Drake's approximations ([d x_T / d x_0, d x_T / d u]): "
+            + ", ".join(f"{a} vs {b}: {dd[a][b]:.3g}" for a, b in pairs) + ".", "",
+        ]  # fmt: skip
     return "\n".join(lines + WHY)
 
 
@@ -502,16 +421,14 @@ WHY = [
 
 
 def _plot_trajectories(path: Path, runs: dict) -> Path:
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+    fig, axes = outputs.pyplot().subplots(2, 2, figsize=(11, 7.5))
     panels = {"box": ((0, 0, lambda m: m["xs"][:, 0]),
                       (0, 1, lambda m: 1e3 * (m["xs"][:, 1] - m["x0"][1]))),
               "ball": ((1, 0, lambda m: 1e3 * (m["xs"][:, 2] - cs.BALL_RADIUS)),
                        (1, 1, lambda m: m["xs"][:, 7]))}  # fmt: skip
     for scene, by_step in runs.items():
         for step, style in (("coarse", "-"), ("fine", ":")):
-            res = by_step.get(step)
-            if res is None:
-                continue
+            res = by_step.get(step, {"models": {}})
             for k, m in res["models"].items():
                 tt = res["time_step"] * np.arange(len(m["xs"]))
                 lab = f"{label(k)}, h = {1e3 * res['time_step']:g} ms"
@@ -526,20 +443,17 @@ def _plot_trajectories(path: Path, runs: dict) -> Path:
     axes[0, 0].set(xlabel="t (s)", ylabel="x (m)", title="Box: position after the push")
     axes[0, 1].set(xlabel="t (s)", ylabel="z - z_0 (mm)", title="Box: height (hop)")
     axes[1, 0].set(xlabel="t (s)", ylabel="z - r (mm)", title="Ball: ground clearance")
-    axes[1, 0].set_ylim(-25, 60)
     axes[1, 1].set(xlabel="t (s)", ylabel="v_y (m/s)", title="Ball: horizontal velocity")
     for ax in axes.flat:
         ax.grid(alpha=0.3)
+    axes[1, 0].set_ylim(-25, 60)
     axes[0, 0].legend(fontsize=6, ncol=2)
     axes[1, 1].legend(fontsize=6, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return outputs.save_figure(fig, path)
 
 
 def _plot_gradients(path: Path, summary: dict) -> Path:
-    fig, axes = plt.subplots(2, 2, figsize=(15, 8))
+    fig, axes = outputs.pyplot().subplots(2, 2, figsize=(15, 8))
     parts = (("dx_dx0", "x_0"), ("dx_dv0", "v_0"), ("dx_du", "u"))
     for col, scene in enumerate(cs.SCENES):
         g = summary["scenes"][scene]["gradients"]
@@ -559,19 +473,11 @@ def _plot_gradients(path: Path, summary: dict) -> Path:
         names = [n for n, _, _ in KEY_ENTRIES[scene]]
         width = 0.8 / len(g["entries"])
         for i, (k, e) in enumerate(g["entries"].items()):
-            ax.bar(
-                np.arange(len(names)) + i * width,
-                [e.get(n, np.nan) for n in names],
-                width,
-                label=label(k),
-                color=COLORS[k],
-            )
+            ax.bar(np.arange(len(names)) + i * width, [e.get(n, np.nan) for n in names], width,
+                   label=label(k), color=COLORS[k])  # fmt: skip
         ax.set_xticks(np.arange(len(names)) + 0.4 - width / 2, names, fontsize=7, rotation=15)
         ax.set_yscale("symlog", linthresh=1e-2)
         ax.set_title(f"{scene}: gradient entries", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
         ax.legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return outputs.save_figure(fig, path)

@@ -2,7 +2,9 @@
 box pushed off that slides to rest on its two bottom edges, and a ball dropped and thrown
 horizontally that lands, slides and rolls. Every simulator gets the same masses, friction and
 initial state; :class:`ComparisonScenes` holds the settings and makes each scene, its start,
-Drake's contact material and the rigid-body slopes the simulators are measured against.
+Drake's contact material and the rigid-body answers (slopes, the box's Coulomb slide) the
+simulators are measured against; :func:`box_metrics` and :func:`ball_metrics` measure a
+trajectory of each (penetration, the box's slide and hop, the ball's rebound, rest and slip).
 
 - ``"box"``: the shipped scene ``box_push`` (``box_planar.sdf``: x, z, pitch; contact points at
   its four edges in the x-z plane), resting on the ground (centre at ``BOX_HALF[1]``) and moving
@@ -23,7 +25,10 @@ import numpy as np
 
 from drake_abs.multibody.scene import Scene
 
-__all__ = ["BALL_RADIUS", "BOX_HALF", "GRAVITY", "SCENES", "ComparisonScenes"]
+__all__ = [
+    "BALL_RADIUS", "BOX_HALF", "GRAVITY", "SCENES", "ComparisonScenes", "ball_metrics",
+    "box_metrics",
+]  # fmt: skip
 
 #: The scenes' names, in the order of the per-scene settings (box, ball).
 SCENES = ("box", "ball")
@@ -136,6 +141,79 @@ class ComparisonScenes:
             "dz_T/dz_0": 0.0,
             "droll_T/dvy_0": float(-5 / 7 * (T - t_land) / BALL_RADIUS),
         }
+
+    def coulomb_slide(self, time_step: float) -> dict[str, float | None]:
+        """The box's slide (m) over ``box_duration`` on rigid ground with Coulomb friction, from
+        ``box_speed`` under the push, decelerating at ``a = mu g - u / m`` (m = 1 kg; m/s^2,
+        ``deceleration_mps2``): ``continuous_m`` = v0 t - a t^2 / 2 (t the stop time or the
+        duration) and ``discrete_m`` = h sum_k max(0, v0 - a h k) over the steps k = 1, 2, ...
+        of ``time_step`` = h (s) within the duration (semi-implicit Euler). Both None when the
+        push overcomes friction (a <= 0)."""
+        if not (isinstance(time_step, (int, float)) and np.isfinite(time_step) and time_step > 0):
+            raise ValueError(f"time_step must be a number > 0 (s); got {time_step!r}")
+        a = self.friction * GRAVITY - self.box_push / 1.0
+        if a <= 0:
+            return {"continuous_m": None, "discrete_m": None}
+        v0, dv, T = self.box_speed, a * time_step, self.box_duration
+        k = np.arange(1, min(int(np.floor(v0 / dv)), int(round(T / time_step))) + 1)
+        t = min(T, v0 / a)
+        discrete = float(time_step * np.sum(v0 - dv * k))
+        return {
+            "continuous_m": v0 * t - a * t**2 / 2,
+            "discrete_m": discrete,
+            "deceleration_mps2": a,
+        }
+
+
+def box_metrics(xs: np.ndarray, x0: np.ndarray, slide: dict | None = None) -> dict:
+    """Measures of a box trajectory: xs (N, 6) states (x, z, pitch, their rates; m, rad, m/s,
+    rad/s) from x0 (6,), the state it was pushed from: the slide ``xs[-1, 0] - x0[0]`` (m), the
+    deepest penetration of its two bottom edges over the run and at the first state (m, >= 0),
+    the hop (the highest rise of the centre above ``x0``'s, m), the final position, pitch and
+    speed, and the slide's relative error against ``slide``'s ``continuous_m`` and
+    ``discrete_m`` (:meth:`ComparisonScenes.coulomb_slide`; None where that is None)."""
+    xs, x0 = np.asarray(xs, dtype=float), np.asarray(x0, dtype=float)
+    if xs.ndim != 2 or xs.shape[1] != 6 or x0.shape != (6,):
+        raise ValueError(f"xs must be (N, 6) and x0 (6,); got {xs.shape}, {x0.shape}")
+    z, pitch, (a, c) = xs[:, 1], xs[:, 2], BOX_HALF  # the two bottom edges' heights:
+    corners = np.stack([z - s * a * np.sin(pitch) - c * np.cos(pitch) for s in (-1.0, 1.0)], 1)
+    moved = float(xs[-1, 0] - x0[0])
+    out = {
+        "slide_m": moved,
+        "max_penetration_m": float(max(0.0, -corners.min())),
+        "rest_penetration_before_push_m": float(max(0.0, -corners[0].min())),
+        "hop_m": float(np.max(xs[:, 1]) - x0[1]),
+        "final": {"x_m": float(xs[-1, 0]), "z_m": float(xs[-1, 1]), "pitch_rad": float(xs[-1, 2]),
+                  "speed_mps": float(np.linalg.norm(xs[-1, 3:]))},
+    }  # fmt: skip
+    for key in ("continuous", "discrete"):
+        ref = (slide or {}).get(f"{key}_m")
+        out[f"rel_err_vs_{key}"] = None if ref is None else (moved - ref) / ref
+    return out
+
+
+def ball_metrics(xs: np.ndarray) -> dict:
+    """Measures of a ball trajectory: xs (N, 12) states (x, y, z, yaw, pitch, roll, their
+    rates; m, rad, m/s, rad/s); the ball rolls about x, so only roll turns. The deepest
+    penetration (m, >= 0), the first impact step (the first step whose vertical speed turns
+    from down to up; the last step if none), the highest ground clearance from it on
+    (``rebound_height_m``) and at the end (``rest_height_m``; negative: penetration), and the
+    final y, v_y, v_z, roll rate and slip (the contact point's velocity along y, m/s)."""
+    xs = np.asarray(xs, dtype=float)
+    if xs.ndim != 2 or xs.shape[1] != 12:
+        raise ValueError(f"xs must be (N, 12) ball states; got {xs.shape}")
+    phi, vz = xs[:, 2] - BALL_RADIUS, xs[:, 8]
+    going_up = np.flatnonzero((vz[1:] >= 0) & (vz[:-1] < 0))  # the first impact step
+    impact = int(going_up[0]) + 1 if going_up.size else len(xs) - 1
+    vy, wx = xs[-1, 7], xs[-1, 11]
+    return {
+        "max_penetration_m": float(max(0.0, -phi.min())),
+        "impact_step": impact,
+        "rebound_height_m": float(phi[impact:].max()),
+        "rest_height_m": float(phi[-1]),
+        "final": {"y_m": float(xs[-1, 1]), "vy_mps": float(vy), "vz_mps": float(vz[-1]),
+                  "roll_rate_radps": float(wx), "slip_mps": float(vy + BALL_RADIUS * wx)},
+    }  # fmt: skip
 
 
 def _index(name: str) -> int:

@@ -33,7 +33,6 @@ from drake_abs.experiments.drake_comparison import (
     DRAKE,
     OURS,
     Config,
-    analytic_slide,
     run,
     simulate_scene,
 )
@@ -168,4 +167,4 @@ def test_deterministic():
     b = simulate_scene("box", config.time_step, config, gradients=False)
     for name in a["models"]:
         np.testing.assert_array_equal(a["models"][name]["xs"], b["models"][name]["xs"])
-    assert analytic_slide(config, config.time_step)["discrete_m"] == pytest.approx(0.097, abs=1e-4)
+    assert config.coulomb_slide(config.time_step)["discrete_m"] == pytest.approx(0.097, abs=1e-4)

@@ -1,12 +1,20 @@
 """The box and ball the comparison experiments share: each scene's start is its initial state,
 the settings reach the scene (friction, speeds, step, activation distance), the rigid-body
-slopes are the derivatives of their closed forms, and bad names are refused."""
+slopes are the derivatives of their closed forms, the Coulomb slide is the recursion's, the
+trajectory measures read penetration, slide, hop, rebound and slip, and bad input is refused."""
 
 import numpy as np
 import pytest
 
 from drake_abs.multibody import build_scene_model
-from drake_abs.reference.comparison_scenes import BALL_RADIUS, GRAVITY, ComparisonScenes
+from drake_abs.reference.comparison_scenes import (
+    BALL_RADIUS,
+    BOX_HALF,
+    GRAVITY,
+    ComparisonScenes,
+    ball_metrics,
+    box_metrics,
+)
 
 
 @pytest.mark.parametrize("name", ["box", "ball"])
@@ -66,3 +74,59 @@ def test_drake_material_is_the_settings():
 def test_unknown_scene_is_refused(method):
     with pytest.raises(ValueError, match=r"scene must be one of \('box', 'ball'\); got 'cube'"):
         getattr(ComparisonScenes(), method)("cube")
+
+
+@pytest.mark.parametrize("h", [0.01, 0.003])
+def test_coulomb_slide_is_the_step_recursion_and_the_continuous_stop(h):
+    s = ComparisonScenes(box_push=1.0, box_duration=1.0)
+    a = s.friction * GRAVITY - s.box_push
+    v, x = s.box_speed, 0.0
+    for _ in range(int(round(s.box_duration / h))):  # semi-implicit Euler until it stops
+        v = max(0.0, v - a * h)
+        x += h * v
+    slide = s.coulomb_slide(h)
+    assert slide["discrete_m"] == pytest.approx(x, abs=1e-12)
+    assert slide["continuous_m"] == pytest.approx(s.box_speed**2 / (2 * a), rel=1e-12)
+    assert slide["deceleration_mps2"] == pytest.approx(a)
+    assert ComparisonScenes(box_push=10.0).coulomb_slide(h) == {
+        "continuous_m": None, "discrete_m": None,
+    }  # fmt: skip
+    with pytest.raises(ValueError, match="time_step"):
+        s.coulomb_slide(0.0)
+
+
+def test_box_metrics_read_penetration_slide_and_hop():
+    n = 5
+    xs = np.zeros((n, 6))
+    xs[:, 0] = np.linspace(0.0, 0.2, n)  # slides 0.2 m
+    xs[:, 1] = BOX_HALF[1]
+    xs[0, 1] -= 1e-4  # starts 0.1 mm into the ground
+    xs[2, 1] += 3e-3  # hops 3 mm
+    xs[-1, 3] = 0.01
+    m = box_metrics(xs, xs[0], {"continuous_m": 0.25, "discrete_m": None})
+    assert m["slide_m"] == pytest.approx(0.2)
+    assert m["max_penetration_m"] == pytest.approx(1e-4)
+    assert m["rest_penetration_before_push_m"] == pytest.approx(1e-4)
+    assert m["hop_m"] == pytest.approx(3e-3 + 1e-4)
+    assert m["rel_err_vs_continuous"] == pytest.approx(-0.2) and m["rel_err_vs_discrete"] is None
+    assert m["final"]["speed_mps"] == pytest.approx(0.01)
+    tilted = xs.copy()
+    tilted[:, 2] = 0.1  # the lower edge dips by a sin(pitch) + c (1 - cos(pitch))
+    dip = BOX_HALF[0] * np.sin(0.1) - BOX_HALF[1] * (1 - np.cos(0.1))
+    assert box_metrics(tilted, tilted[0])["max_penetration_m"] == pytest.approx(dip + 1e-4)
+    with pytest.raises(ValueError, match="xs must be"):
+        box_metrics(xs[:, :3], xs[0])
+
+
+def test_ball_metrics_read_impact_rebound_rest_and_slip():
+    xs = np.zeros((6, 12))
+    xs[:, 2] = BALL_RADIUS + np.array([0.3, 0.1, -0.002, 0.01, 0.0, -1e-4])
+    xs[:, 8] = [-1.0, -2.0, -2.2, 0.5, -0.1, 0.0]  # falls, turns up at step 3
+    xs[-1, 7], xs[-1, 11] = 0.7, -10.0  # v_y, roll rate: slip 0.7 - 0.05 * 10 = 0.2 m/s
+    m = ball_metrics(xs)
+    assert m["impact_step"] == 3 and m["max_penetration_m"] == pytest.approx(0.002)
+    assert m["rebound_height_m"] == pytest.approx(0.01)
+    assert m["rest_height_m"] == pytest.approx(-1e-4)
+    assert m["final"]["slip_mps"] == pytest.approx(0.7 - BALL_RADIUS * 10.0)
+    with pytest.raises(ValueError, match="xs must be"):
+        ball_metrics(xs[:, :6])
