@@ -24,34 +24,34 @@ one step's travel of the ground (``[0, 2 v_max dt]``; uniform heights put about 
 points in contact), speeds uniform in [-v_max, v_max], the next velocity from the exact model
 plus Gaussian noise ``noise`` (m/s). The true height is 0.
 
+The data, losses, fits and descent are :mod:`drake_abs.learning.ground_height_fit`.
 Outputs in ``out``: ``table1.csv``, ``figure1_landscapes.png``, ``figure3_bounds.png``,
 ``generalization.png``, ``summary.json``.
 """
 
 from __future__ import annotations
 
-import csv
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
-from drake_abs.experiments.outputs import file_list, progress, results_dir
-from drake_abs.learning.generalization import (
-    PAPER_TABLE_1,
-    generalization_bound,
-    lipschitz_table,
-    loss_lipschitz,
-    measured_lipschitz,
-    toy_bounds,
+from drake_abs.experiments.outputs import (
+    file_list,
+    progress,
+    pyplot,
+    results_dir,
+    save_figure,
+    write_csv,
+    write_json,
 )
+from drake_abs.learning import generalization as gb
+from drake_abs.learning import ground_height_fit as fit
 from drake_abs.learning.ground_toy import GroundToy
 
 NAME = "implicit-learning"
-LOSSES = ("explicit", "violation")
+LOSSES = fit.KINDS
 
 
 @dataclass(frozen=True)
@@ -85,205 +85,119 @@ class Config:
                    lipschitz_points=2000)  # fmt: skip
 
 
-def sample(toy: GroundToy, rng, n: int, config: Config):
-    """n data points (z, v, y) at true height 0 (module docstring)."""
-    z, v, y = toy.sample(rng, n, 0.0, config.noise)
-    near = rng.random(n) < config.near
-    z[near] = rng.uniform(0.0, 2 * toy.v_max * toy.dt, near.sum())
-    y[near] = toy.f(0.0, z[near], v[near]) + config.noise * rng.standard_normal(near.sum())
-    return z, v, y
-
-
-def mean_loss(toy: GroundToy, kind: str, theta: float, data, config: Config, mu: float = 0.0):
-    """Mean loss and its derivative in theta over a data set; kind "explicit" (through the
-    solver at mu; mu = 0 is also the naive-implicit loss) or "violation"."""
-    z, v, y = data
-    if kind == "explicit":
-        loss, grad, ok = toy.explicit_loss(theta, z, v, y, mu)
-        if not ok.all():
-            raise RuntimeError(f"{(~ok).sum()} LCP solves did not converge at theta={theta}")
-        return float(loss.mean()), float(grad.mean())
-    r = toy.violation_implicit_loss(theta, z, v, y, config.eps)
-    if not r.converged.all():
-        raise RuntimeError("the violation loss's inner minimisation did not converge")
-    return float(r.loss.mean()), float(r.grad[:, 0].mean())
-
-
-def fit(toy: GroundToy, kind: str, data, config: Config) -> float:
-    """The height minimising the mean loss: a grid over [-search, search], then a bounded
-    scalar refinement around the best grid point."""
-    grid = np.linspace(-config.search, config.search, 201)
-    values = [mean_loss(toy, kind, t, data, config)[0] for t in grid]
-    k = int(np.argmin(values))
-    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-    res = minimize_scalar(lambda t: mean_loss(toy, kind, t, data, config)[0], bounds=(lo, hi),
-                          method="bounded", options={"xatol": 1e-9})  # fmt: skip
-    return float(res.x) if res.fun <= values[k] else float(grid[k])
-
-
-def descend(toy: GroundToy, kind: str, data, theta0: float, config: Config) -> float:
-    """Gradient descent with a normalised step (so that the losses' scales do not matter):
-    ``theta -= step * sign(grad)``, step halving on a sign change, from 5 mm."""
-    theta, step, last = theta0, 5e-3, 0.0
-    for _ in range(config.descent_steps):
-        _, g = mean_loss(toy, kind, theta, data, config)
-        if g == 0.0:
-            break  # a flat landscape: no information
-        s = np.sign(g)
-        if last and s != last:
-            step *= 0.5
-        theta -= step * s
-        last = s
-    return theta
-
-
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     config = config or Config()
     out = results_dir(NAME, out)
     start = time.perf_counter()
     toy = GroundToy()
     rng = np.random.default_rng(config.seed)
-    eps = config.eps
-    bounds = toy_bounds(toy, eps)
-    ours = lipschitz_table(toy, eps)
-    measured = measured_lipschitz(toy, eps, rng, config.lipschitz_points)
-    table = [{"constant": k, "ours_closed_form": ours[k], "ours_measured": measured[k],
-              "paper": PAPER_TABLE_1[k]} for k in ours]  # fmt: skip
-    lip_ours = loss_lipschitz(ours, bounds, eps)
-    lip_paper = loss_lipschitz(PAPER_TABLE_1, bounds, eps)
+    eps, delta = config.eps, config.delta
 
-    # Figure 1: landscapes
-    data = sample(toy, rng, config.landscape_points, config)
+    def sample(n):
+        return fit.sample_near_ground(toy, rng, n, noise=config.noise, near=config.near)
+
+    bounds = gb.toy_bounds(toy, eps)
+    ours = gb.lipschitz_table(toy, eps)
+    measured = gb.measured_lipschitz(toy, eps, rng, config.lipschitz_points)
+    table = [{"constant": k, "ours_closed_form": ours[k], "ours_measured": measured[k],
+              "paper": gb.PAPER_TABLE_1[k]} for k in ours]  # fmt: skip
+    lip_ours = gb.loss_lipschitz(ours, bounds, eps)
+    lip_paper = gb.loss_lipschitz(gb.PAPER_TABLE_1, bounds, eps)
+
+    # Figure 1: landscapes, zeroed (minimum 0) and, for comparing shapes across losses of
+    # different units, divided by the largest value on the interval
+    data = sample(config.landscape_points)
     thetas = np.linspace(-config.landscape_range, config.landscape_range, config.landscape_steps)
-    curves = {"explicit (= naive implicit)": [mean_loss(toy, "explicit", t, data, config)[0]
-                                              for t in thetas]}  # fmt: skip
-    curves[f"violation implicit, eps = {eps:g}"] = [
-        mean_loss(toy, "violation", t, data, config)[0] for t in thetas
-    ]
-    for mu in config.mus:
-        curves[f"explicit through the solver, mu = {mu:g}"] = [
-            mean_loss(toy, "explicit", t, data, config, mu)[0] for t in thetas
-        ]
-    # zeroed (minimum 0) and, for comparing shapes across losses of different units, divided by
-    # the largest value on the interval
-    landscapes = {k: (np.array(v) - min(v)).tolist() for k, v in curves.items()}
+    losses = {"explicit (= naive implicit)": ("explicit", 0.0),
+              f"violation implicit, eps = {eps:g}": ("violation", 0.0),
+              **{f"explicit through the solver, mu = {mu:g}": ("explicit", mu)
+                 for mu in config.mus}}  # fmt: skip
+    curves = {k: fit.loss_landscape(toy, kind, thetas, data, eps=eps, mu=mu)
+              for k, (kind, mu) in losses.items()}  # fmt: skip
+    landscapes = {k: (v - v.min()).tolist() for k, v in curves.items()}
     shapes = {k: (np.array(v) / max(max(v), 1e-300)).tolist() for k, v in landscapes.items()}
     argmins = {k: float(thetas[int(np.argmin(v))]) for k, v in curves.items()}
 
     # Figure 3: bounds
-    sizes = np.array(config.bound_sizes)
-    bound_curves = {kind: generalization_bound(lip_ours[kind], bounds.B_theta,
-                                               bounds.B_vimp if kind == "vimp" else bounds.B_exp,
-                                               sizes, delta=config.delta).tolist()
-                    for kind in ("exp", "nimp", "vimp")}  # fmt: skip
-    bound_curves["vimp (paper's Table 1)"] = generalization_bound(
-        lip_paper["vimp"], bounds.B_theta, bounds.B_vimp, sizes, delta=config.delta
-    ).tolist()
-    deltas = np.logspace(-6, -0.5, 12)
-    vimp_delta = [float(generalization_bound(lip_ours["vimp"], bounds.B_theta, bounds.B_vimp,
-                                             1e6, delta=d)) for d in deltas]  # fmt: skip
+    def bound(lip, kind, n, d=delta):
+        B = bounds.B_vimp if kind == "vimp" else bounds.B_exp
+        return gb.generalization_bound(lip[kind], bounds.B_theta, B, n, delta=d)
 
-    # measured generalisation and gradient descent
-    test = sample(toy, rng, config.test_points, config)
-    measured_gen = {kind: {"theta_error": [], "gap": []} for kind in LOSSES}
+    sizes = np.array(config.bound_sizes)
+    bound_curves = {kind: bound(lip_ours, kind, sizes).tolist() for kind in ("exp", "nimp", "vimp")}
+    bound_curves["vimp (paper's Table 1)"] = bound(lip_paper, "vimp", sizes).tolist()
+    deltas = np.logspace(-6, -0.5, 12)
+    vimp_delta = [float(bound(lip_ours, "vimp", 1e6, d)) for d in deltas]
+
+    # measured generalisation (medians over the training sets of each size) and gradient descent
+    test = sample(config.test_points)
+    errs = {kind: np.zeros((len(config.sizes), config.seeds)) for kind in LOSSES}
+    gaps = {kind: np.zeros((len(config.sizes), config.seeds)) for kind in LOSSES}
     bar = progress(total=len(config.sizes) * config.seeds, desc=f"{NAME}: fits")
-    for n in config.sizes:
-        errs = {kind: [] for kind in LOSSES}
-        gaps = {kind: [] for kind in LOSSES}
-        for _ in range(config.seeds):
-            train = sample(toy, rng, n, config)
+    for i, n in enumerate(config.sizes):
+        for j in range(config.seeds):
+            train = sample(n)
             for kind in LOSSES:
-                theta = fit(toy, kind, train, config)
-                errs[kind].append(abs(theta))
-                gaps[kind].append(mean_loss(toy, kind, theta, test, config)[0]
-                                  - mean_loss(toy, kind, theta, train, config)[0])  # fmt: skip
+                theta = fit.fit_height(toy, kind, train, eps=eps, search=config.search)
+                errs[kind][i, j] = abs(theta)
+                on_test, on_train = (fit.mean_loss(toy, kind, theta, d, eps=eps)[0]
+                                     for d in (test, train))  # fmt: skip
+                gaps[kind][i, j] = on_test - on_train
             bar.update()
-        for kind in LOSSES:
-            measured_gen[kind]["theta_error"].append(float(np.median(errs[kind])))
-            measured_gen[kind]["gap"].append(float(np.median(gaps[kind])))
     bar.close()
-    descent_data = sample(toy, rng, config.descent_points, config)
-    descent = {kind: {f"{t0:+g}": descend(toy, kind, descent_data, t0, config)
+    measured_gen = {kind: {"theta_error": np.median(errs[kind], axis=1).tolist(),
+                           "gap": np.median(gaps[kind], axis=1).tolist()}
+                    for kind in LOSSES}  # fmt: skip
+    descent_data = sample(config.descent_points)
+    descent = {kind: {f"{t0:+g}": fit.descend_height(toy, kind, descent_data, t0, eps=eps,
+                                                     steps=config.descent_steps)
                       for t0 in config.starts} for kind in LOSSES}  # fmt: skip
 
-    files = {"table1": out / "table1.csv", "summary": out / "summary.json"}
-    with files["table1"].open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(table[0]))
-        writer.writeheader()
-        writer.writerows(table)
-    files.update(_plots(out, thetas, shapes, sizes, bound_curves, deltas, vimp_delta,
-                        config, measured_gen))  # fmt: skip
+    files = {"table1": write_csv(out / "table1.csv", table), "summary": out / "summary.json"}
+    files.update(_plots(out, thetas, shapes, bound_curves, deltas, vimp_delta, config,
+                        measured_gen))  # fmt: skip
     summary = {
         "config": asdict(config), "toy": asdict(toy), "lambda_max": toy.lambda_max,
         "bounds": asdict(bounds), "table1": table,
         "loss_lipschitz": {"ours": lip_ours, "paper_table": lip_paper},
         "landscape_thetas": thetas.tolist(), "landscapes": landscapes,
         "landscape_argmin": argmins, "bound_sizes": sizes.tolist(), "bounds_vs_n": bound_curves,
-        "data_ratio_exp_over_vimp": {
-            "ours": _data_ratio(lip_ours, bounds, 1e4, config.delta),
-            "paper_table": _data_ratio(lip_paper, bounds, 1e4, config.delta),
-        },
+        "data_ratio_exp_over_vimp": {"ours": gb.data_ratio(lip_ours, bounds, 1e4, delta),
+                                     "paper_table": gb.data_ratio(lip_paper, bounds, 1e4, delta)},
         "measured_generalization": {"sizes": list(config.sizes), **measured_gen},
         "descent_final_theta": descent, "seconds": time.perf_counter() - start,
         "folder": str(out),
     }  # fmt: skip
     summary["files"] = file_list(files)
-    files["summary"].write_text(json.dumps(summary, indent=1))
+    write_json(files["summary"], summary, indent=1)
     return summary
 
 
-def _data_ratio(lip: dict, bounds, n0: float, delta: float) -> float:
-    """How many times more data than ``n0`` the explicit loss's bound needs to fall to the
-    violation loss's bound at ``n0`` (the bounds fall monotonically in n: bisection in log n)."""
-    from scipy.optimize import brentq
-
-    target = float(generalization_bound(lip["vimp"], bounds.B_theta, bounds.B_vimp, n0,
-                                        delta=delta))  # fmt: skip
-
-    def gap(log_n):
-        return float(generalization_bound(lip["exp"], bounds.B_theta, bounds.B_exp,
-                                          np.exp(log_n), delta=delta)) - target  # fmt: skip
-
-    return float(np.exp(brentq(gap, np.log(n0), np.log(n0) + 60.0)) / n0)
-
-
-def _plots(out, thetas, landscapes, sizes, bound_curves, deltas, vimp_delta, config, gen):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    paths = {}
+def _plots(out, thetas, landscapes, bound_curves, deltas, vimp_delta, config, gen):
+    plt, paths = pyplot(), {}
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for label, y in landscapes.items():
-        axes[0].plot(thetas * 100, y, label=label)
-    axes[0].set(xlabel="ground height theta (cm; true 0)",
-                ylabel="(mean loss - minimum) / largest value shown")  # fmt: skip
     zoom = np.abs(thetas) <= 0.02
     for label, y in landscapes.items():
+        axes[0].plot(thetas * 100, y, label=label)
         y = np.array(y)[zoom]
         axes[1].plot(thetas[zoom] * 100, y / max(y.max(), 1e-300), label=label)
+    axes[0].set(xlabel="ground height theta (cm; true 0)",
+                ylabel="(mean loss - minimum) / largest value shown")  # fmt: skip
     axes[1].set(xlabel="theta (cm), zoomed (each curve rescaled on this interval)")
     axes[0].legend(fontsize=7)
     fig.suptitle("Loss landscapes of the 1-D toy (Bianchini et al. 2022, Fig. 1)")
-    fig.tight_layout()
-    paths["figure1_landscapes"] = out / "figure1_landscapes.png"
-    fig.savefig(paths["figure1_landscapes"], dpi=130)
-    plt.close(fig)
+    paths["figure1_landscapes"] = save_figure(fig, out / "figure1_landscapes.png", dpi=130)
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for label, y in bound_curves.items():
-        axes[0].loglog(sizes, y, label=label)
-    axes[0].set(xlabel="data points n", ylabel=f"bound on generalisation error (delta = "
-                f"{config.delta:g})")  # fmt: skip
+        axes[0].loglog(config.bound_sizes, y, label=label)
+    axes[0].set(xlabel="data points n",
+                ylabel=f"bound on generalisation error (delta = {config.delta:g})")  # fmt: skip
     axes[0].legend(fontsize=8)
     axes[1].semilogx(deltas, vimp_delta)
     axes[1].set(xlabel="failure probability delta", ylabel="violation-loss bound at n = 1e6")
     fig.suptitle("Theorem 1 on the toy (Bianchini et al. 2022, Fig. 3)")
-    fig.tight_layout()
-    paths["figure3_bounds"] = out / "figure3_bounds.png"
-    fig.savefig(paths["figure3_bounds"], dpi=130)
-    plt.close(fig)
+    paths["figure3_bounds"] = save_figure(fig, out / "figure3_bounds.png", dpi=130)
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for kind in LOSSES:
@@ -294,10 +208,7 @@ def _plots(out, thetas, landscapes, sizes, bound_curves, deltas, vimp_delta, con
     axes[0].legend()
     fig.suptitle(f"Measured generalisation (noise {config.noise:g} m/s, {config.seeds} sets "
                  "per size)")  # fmt: skip
-    fig.tight_layout()
-    paths["generalization"] = out / "generalization.png"
-    fig.savefig(paths["generalization"], dpi=130)
-    plt.close(fig)
+    paths["generalization"] = save_figure(fig, out / "generalization.png", dpi=130)
     return paths
 
 
@@ -326,7 +237,3 @@ def report(summary: dict) -> str:
                              for k, v in summary["descent_final_theta"].items()))  # fmt: skip
     lines.append(f"  {summary['seconds']:.0f} s; results in {summary['folder']}")
     return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    print(report(run(Config.test_size(), "results/implicit-learning-test")))

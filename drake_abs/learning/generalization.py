@@ -154,3 +154,22 @@ def measured_lipschitz(
         "L_lambda,theta^nimp": float(dlam_nimp.max()),
         "L_lambda,theta^vimp": float(lam_v.max()),
     }
+
+
+def data_ratio(lip: dict[str, float], bounds: ToyBounds, n0: float, delta: float = 0.05) -> float:
+    """How many times more data than ``n0`` the explicit loss's bound needs to fall to the
+    violation loss's bound at ``n0``, for the losses' Lipschitz constants ``lip`` (keys "exp"
+    and "vimp", :func:`loss_lipschitz`): the bounds fall monotonically in n, so a root search
+    in log n (up to e^60 times n0)."""
+    from scipy.optimize import brentq
+
+    if not (np.isfinite(n0) and n0 >= 1):
+        raise ValueError(f"n0 must be a finite number of data points >= 1; got {n0!r}")
+    target = float(generalization_bound(lip["vimp"], bounds.B_theta, bounds.B_vimp, n0,
+                                        delta=delta))  # fmt: skip
+
+    def gap(log_n):
+        return float(generalization_bound(lip["exp"], bounds.B_theta, bounds.B_exp,
+                                          np.exp(log_n), delta=delta)) - target  # fmt: skip
+
+    return float(np.exp(brentq(gap, np.log(n0), np.log(n0) + 60.0)) / n0)
