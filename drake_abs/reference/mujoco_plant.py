@@ -157,7 +157,7 @@ class MujocoStepper:
 
     @property
     def time_step(self) -> float:
-        """Seconds per step: ``frame_skip * model.opt.timestep``."""
+        """The seconds one step lasts, ``frame_skip * model.opt.timestep``."""
         return self.frame_skip * float(self.model.opt.timestep)
 
     def state(self, data) -> np.ndarray:
