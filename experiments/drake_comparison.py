@@ -27,9 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs.engine import open_loop
 from drake_abs.experiments import outputs
+from drake_abs.multibody import build_scene_model
 from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
 from drake_abs.reference import comparison_scenes as cs
+from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.reference.drake_twin import APPROXIMATION_LABELS
 
 NAME = "drake-comparison"
@@ -98,9 +101,6 @@ class Config(cs.ComparisonScenes):
 
 def steppers(scene: str, h: float, config: Config, ours: bool = True) -> dict:
     """Every model of ``scene`` at step h, by name: Drake's (and its hydroelastic box), ours."""
-    from drake_abs.multibody import build_scene_model
-    from drake_abs.reference.drake_plant import DrakePlantStepper
-
     spec = config.scene(scene, h)
     drake = {"time_step": h, "material": config.drake_material()}
     out = {a: DrakePlantStepper(spec, a, **drake) for a in DRAKE}
@@ -118,8 +118,6 @@ def steppers(scene: str, h: float, config: Config, ours: bool = True) -> dict:
 
 def roll(stepper, x0, u, steps: int, jacobians: bool = False):
     """(the engine's open loop of ``steps`` steps at constant u, seconds per step)."""
-    from drake_abs.engine import open_loop
-
     start = time.perf_counter()
     traj = open_loop(stepper, x0, np.tile(u, (steps, 1)), jacobians=jacobians,
                      on_unconverged="flag")  # fmt: skip

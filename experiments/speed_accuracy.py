@@ -36,17 +36,21 @@ with the gradient (``gradient_cost_s_per_s``), the best of ``repeats`` timings. 
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from drake_abs.contact.smoothing import GaussianMatched, TimeStepScaled
 from drake_abs.contact.unconverged import UnconvergedStepError
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.engine import open_loop
+from drake_abs.experiments import outputs
+from drake_abs.multibody import Scene, build_scene_model
+from drake_abs.multibody.energy import mechanical_energy
 from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
 from drake_abs.reference.comparison_scenes import SCENES, ComparisonScenes
+from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.reference.drake_twin import APPROXIMATION_LABELS
 
 NAME = "speed-accuracy"
@@ -162,8 +166,6 @@ def scene_inputs(scene: str) -> dict:
     joints: the translation of the base); ``x0_columns`` and ``push``, the inputs (box and ball
     as above; an articulated scene: the base's initial horizontal and vertical speeds, the
     first and last prismatic joints' velocities); their ``names``; the ``analytic`` entries."""
-    from drake_abs.multibody import build_scene_model
-
     plant = build_scene_model(_scene_spec(scene, Config())).plant
     prismatic = [plant.get_joint(j) for j in plant.GetJointIndices()
                  if plant.get_joint(j).type_name() == "prismatic"]  # fmt: skip
@@ -183,8 +185,6 @@ def scene_inputs(scene: str) -> dict:
 def _scene_spec(scene: str, config: Config, time_step: float | None = None):
     """The scene (box and ball from ``config.scene_config``; otherwise the shipped scene of that
     name), at ``time_step`` if given."""
-    from drake_abs.multibody import Scene
-
     if scene in SCENES:
         return config.scene_config.scene(scene, time_step)
     spec = Scene.load(scene)
@@ -199,10 +199,6 @@ def _stepper(scene: str, s: Setting, config: Config):
     """The setting's stepper: ours under its smoothing (mu stated at the scene config's step,
     scaled to h) and tolerance, or Drake's plant (the box's and ball's material from the scene
     config; an articulated scene with Drake's default material)."""
-    from drake_abs.contact.smoothing import GaussianMatched, TimeStepScaled
-    from drake_abs.multibody import build_scene_model
-    from drake_abs.reference.drake_plant import DrakePlantStepper
-
     spec, cfg = _scene_spec(scene, config, s.time_step), config.scene_config
     if not s.ours:
         material = cfg.drake_material() if scene in SCENES else None
@@ -223,8 +219,6 @@ def _inputs(scene: str, config: Config) -> tuple[np.ndarray, np.ndarray, float]:
     articulated scene from its initial state, unactuated."""
     if scene in SCENES:
         return config.scene_config.start(scene)
-    from drake_abs.multibody import build_scene_model
-
     model = build_scene_model(_scene_spec(scene, config))
     return model.x0, np.zeros(model.contact_model.nu), config.articulated_duration
 
@@ -248,8 +242,6 @@ def _best_of(repeats: int, fn):
 
 def run_setting(scene: str, s: Setting, config: Config, x0, u, duration, spec: dict) -> dict:
     """States, cost and G of one setting (one rollout in double, one with the gradient)."""
-    from drake_abs.engine import open_loop
-
     stepper = _stepper(scene, s, config)
     U = np.tile(u, (int(round(duration / s.time_step)), 1))
     forward, traj = _best_of(config.repeats, lambda: open_loop(
@@ -274,43 +266,30 @@ class Measures:
 
     def __init__(self, scene: str, config: Config, xs_ref: np.ndarray, G_ref: np.ndarray,
                  spec: dict):  # fmt: skip
-        from drake_abs.multibody import build_scene_model
-
         self.scene, self.config, self.spec = scene, config, spec
         self.model = build_scene_model(_scene_spec(scene, config, config.reference_time_step))
-        self.nq = self.model.plant.num_positions()
+        self.plant, self.nq = self.model.plant, self.model.plant.num_positions()
         self.xs_ref = self._grid(xs_ref, config.reference_time_step)
-        self.E_ref = self.energy(self.xs_ref)
+        self.E_ref = mechanical_energy(self.plant, self.xs_ref)
         self.G_ref = G_ref
 
     def _grid(self, xs: np.ndarray, h: float) -> np.ndarray:
-        stride = int(round(self.config.sample_period / h))
-        if abs(stride * h - self.config.sample_period) > 1e-12:
-            raise ValueError(
-                f"time step {h} must divide sample_period = {self.config.sample_period}"
-            )
+        period = self.config.sample_period
+        if abs((stride := int(round(period / h))) * h - period) > 1e-12:
+            raise ValueError(f"time step {h} must divide sample_period = {period}")
         return xs[::stride]
-
-    def energy(self, xs: np.ndarray) -> np.ndarray:
-        """Kinetic plus potential energy (J) of states (N, nx), by the scene's MultibodyPlant."""
-        plant = self.model.plant
-        context = plant.CreateDefaultContext()
-        out = np.empty(len(xs))
-        for k, x in enumerate(xs):
-            plant.SetPositionsAndVelocities(context, x)
-            out[k] = plant.CalcKineticEnergy(context) + plant.CalcPotentialEnergy(context)
-        return out
 
     def errors(self, xs: np.ndarray, h: float, G: np.ndarray) -> dict:
         grid = self._grid(xs, h)
         rows = list(self.spec["rows"])
         dist = np.linalg.norm(grid[:, rows] - self.xs_ref[:, rows], axis=1)
         phi = self.model.contact_model.distances(xs[:, : self.nq])
+        energy = mechanical_energy(self.plant, grid)
         return {
             "trajectory_error_m": float(np.sqrt(np.mean(dist**2))),
             "final_error_m": float(dist[-1]),
             "penetration_m": float(max(0.0, -phi.min())),
-            "energy_error_J": float(np.max(np.abs(self.energy(grid) - self.E_ref))),
+            "energy_error_J": float(np.max(np.abs(energy - self.E_ref))),
             "gradient_error": float(np.linalg.norm(G - self.G_ref) / np.linalg.norm(self.G_ref)),
         }
 
@@ -318,8 +297,6 @@ class Measures:
 def reference(scene: str, config: Config, spec: dict) -> tuple[np.ndarray, np.ndarray, dict]:
     """The reference states at ``reference_time_step``, G_ref by the least-squares slope of its
     final position, and the reference's own errors at twice its step."""
-    from drake_abs.engine import open_loop
-
     x0, u, duration = _inputs(scene, config)
 
     def states(h: float, x, push) -> np.ndarray:
@@ -329,11 +306,8 @@ def reference(scene: str, config: Config, spec: dict) -> tuple[np.ndarray, np.nd
 
     h = config.reference_time_step
     xs = states(h, x0, u)
-    widths = (
-        config.fd_half_width[SCENES.index(scene)]
-        if scene in SCENES
-        else (config.articulated_half_width,) * 2
-    )
+    widths = (config.fd_half_width[SCENES.index(scene)] if scene in SCENES
+              else (config.articulated_half_width,) * 2)  # fmt: skip
     cols = []
     for j, width in enumerate(widths):
         deltas = np.linspace(-width, width, config.fd_points)
@@ -360,9 +334,9 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Run every setting on every scene; write summary.json, speed_accuracy.png and
     speed_accuracy.md to ``out`` (default results/speed-accuracy); return the summary."""
     config = config or Config()
-    out = results_dir(NAME, out)
+    out = outputs.results_dir(NAME, out)
     summary = {"config": asdict(config), "scenes": {}}
-    bar = progress(total=len(config.scenes) * (1 + len(settings(config))), desc=NAME)
+    bar = outputs.progress(total=len(config.scenes) * (1 + len(settings(config))), desc=NAME)
     for scene in config.scenes:
         bar.set_postfix_str(f"{scene}: reference")
         spec = scene_inputs(scene)
@@ -389,28 +363,24 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
                 "G": r["G"].tolist(),
             })  # fmt: skip
         summary["scenes"][scene] = {
-            "duration_s": duration,
-            "gradient_inputs": list(spec["names"]),
+            "duration_s": duration, "gradient_inputs": list(spec["names"]),
             "position_rows": list(spec["rows"]),
             "reference": {
-                "time_step": config.reference_time_step,
-                "G": G_ref.tolist(),
+                "time_step": config.reference_time_step, "G": G_ref.tolist(),
                 "G_entries_vs_analytic": {
                     name: {"reference": float(G_ref[i, j]), "analytic_rigid": analytic[name]}
-                    for name, i, j in spec["analytic"]
-                },  # fmt: skip
+                    for name, i, j in spec["analytic"]},
                 "self_error_at_twice_the_step": self_error,
             },
-            "rows": rows,
-            "cheapest": cheapest(rows),
-        }
+            "rows": rows, "cheapest": cheapest(rows),
+        }  # fmt: skip
     bar.close()
     summary["folder"] = str(out)
-    summary["files"] = file_list({
+    summary["files"] = outputs.file_list({
         "summary": out / "summary.json", "markdown": out / "speed_accuracy.md",
         "plot": out / "speed_accuracy.png",
     })  # fmt: skip
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    outputs.write_json(out / "summary.json", summary)
     (out / "speed_accuracy.md").write_text(report(summary))
     plot(summary, out / "speed_accuracy.png")
     return summary
@@ -437,42 +407,35 @@ def _fmt(x: float | None, spec: str = "{:.2g}") -> str:
 
 def report(summary: dict) -> str:
     lines = ["# Speed and accuracy", ""]
+    keys = ("cost_s_per_s", "gradient_cost_s_per_s", "trajectory_error_m", "final_error_m",
+            "penetration_m", "energy_error_J", "gradient_error")  # fmt: skip
     for scene, s in summary["scenes"].items():
         if "no_converged_reference" in s:
             lines += [f"## {scene}", "", "No converged reference (the exact plant at the "
                       f"reference step took an unconverged step): {s['no_converged_reference']}",
                       ""]  # fmt: skip
             continue
-        ref = s["reference"]
+        ref, tiers = s["reference"], []
+        for tier in _TIERS:
+            best = [s["cheapest"][f"{who}@{tier:g}"] for who in ("ours", "drake")]
+            tiers.append([f"{tier:g} m", *(cell for b in best for cell in (
+                b["label"] if b else "none", _fmt(b and b["cost_s_per_s"]),
+                _fmt(b and b["gradient_error"])))])  # fmt: skip
         lines += [
             f"## {scene} ({s['duration_s']:g} s simulated; reference: ours, exact, at "
             f"h = {1e3 * ref['time_step']:g} ms, its own trajectory error at twice the step "
-            f"{_fmt(ref['self_error_at_twice_the_step']['trajectory_error_m'])} m)",
-            "",
-            "| trajectory error at most | ours: cheapest setting | s per simulated s | "
-            "gradient error | Drake: cheapest setting | s per simulated s | gradient error |",
-            "| --- | --- | --- | --- | --- | --- | --- |",
-        ]
-        for tier in _TIERS:
-            cells = [f"{tier:g} m"]
-            for who in ("ours", "drake"):
-                b = s["cheapest"][f"{who}@{tier:g}"]
-                cells += [b["label"] if b else "none", _fmt(b and b["cost_s_per_s"]),
-                          _fmt(b and b["gradient_error"])]  # fmt: skip
-            lines.append("| " + " | ".join(cells) + " |")
-        lines += [
-            "",
-            "| setting | s per sim. s | with gradient | trajectory error (m) | "
-            "final error (m) | penetration (m) | energy error (J) | gradient error | "
-            "unconverged steps |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-        ]
-        keys = ("cost_s_per_s", "gradient_cost_s_per_s", "trajectory_error_m", "final_error_m",
-                "penetration_m", "energy_error_J", "gradient_error")  # fmt: skip
-        for r in s["rows"]:
-            cells = [r["label"], *(_fmt(r[k]) for k in keys), str(r["unconverged_steps"])]
-            lines.append("| " + " | ".join(cells) + " |")
-        lines.append("")
+            f"{_fmt(ref['self_error_at_twice_the_step']['trajectory_error_m'])} m)", "",
+            *outputs.markdown_table(
+                ["trajectory error at most", "ours: cheapest setting", "s per simulated s",
+                 "gradient error", "Drake: cheapest setting", "s per simulated s",
+                 "gradient error"], tiers), "",
+            *outputs.markdown_table(
+                ["setting", "s per sim. s", "with gradient", "trajectory error (m)",
+                 "final error (m)", "penetration (m)", "energy error (J)", "gradient error",
+                 "unconverged steps"],
+                [[r["label"], *(_fmt(r[k]) for k in keys), r["unconverged_steps"]]
+                 for r in s["rows"]]), "",
+        ]  # fmt: skip
     return "\n".join(lines)
 
 
@@ -481,11 +444,7 @@ _STYLE = {"exact": ("C0", "o"), "bs": ("C1", "s"), "abs": ("C2", "^"), "gaussian
 
 
 def plot(summary: dict, path: Path) -> None:
-    import matplotlib
-    import matplotlib.ticker
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     scenes = [k for k, v in summary["scenes"].items() if "rows" in v]
     measures = (
@@ -493,7 +452,9 @@ def plot(summary: dict, path: Path) -> None:
         ("gradient_error", "gradient_cost_s_per_s", "gradient error (relative)",
          "with the gradient"),
     )  # fmt: skip
-    fig, axes = plt.subplots(len(scenes), 2, figsize=(11, 4.2 * len(scenes)), squeeze=False)
+    fig, axes = outputs.pyplot().subplots(
+        len(scenes), 2, figsize=(11, 4.2 * len(scenes)), squeeze=False
+    )
     for i, scene in enumerate(scenes):
         for j, (err, cost, ylabel, what) in enumerate(measures):
             ax = axes[i, j]
@@ -506,9 +467,7 @@ def plot(summary: dict, path: Path) -> None:
                                label=Setting(family, 0.01).name)  # fmt: skip
             ax.set(xscale="log", yscale="log", xlabel=f"cost {what} (s per simulated s)",
                    ylabel=ylabel, title=f"{scene}: {ylabel} against cost")  # fmt: skip
-            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.xaxis.set_minor_formatter(NullFormatter())
             ax.grid(True, which="both", alpha=0.3)
         axes[i, 0].legend(fontsize=7, title="marker size: time step", title_fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    outputs.save_figure(fig, path)
