@@ -40,7 +40,6 @@ Outputs in ``out``: ``figure5_<task>.png`` ((a) return, (b) bias), ``summary.jso
 
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -50,7 +49,7 @@ import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
-from drake_abs.experiments.outputs import file_list, progress, readable, results_dir
+from drake_abs.experiments import outputs
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.policy.estimators import PolicyObjective, first_order
 from drake_abs.policy.gradient_stats import measure_bias, measure_variance, reference_gradient
@@ -194,10 +193,8 @@ def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, see
         return est
 
     try:
-        run = train(
-            estimator, task.theta0, Adam(size.learning_rate), size.iterations, seed=seed,
-            progress=False,
-        )  # fmt: skip
+        run = train(estimator, task.theta0, Adam(size.learning_rate), size.iterations, seed=seed,
+                    progress=False)  # fmt: skip
     except (ValueError, FloatingPointError, UnconvergedStepError) as err:
         return {"thetas": thetas[:-1], "rows": rows, "diverged_at": len(thetas) - 1,
                 "error": str(err)}  # fmt: skip
@@ -205,14 +202,13 @@ def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, see
     return {"thetas": thetas, "rows": rows, "diverged_at": None, "error": None}
 
 
-def _checkpoint(
-    obj, exact, theta, size: TrainingSize, seed: int, k: int, cp_seed, references: dict
-) -> dict:
-    """The design's FOPG variance and its bias against the exact reference at theta.
-    ``references`` caches the exact references by (seed, k, theta): every design starts from
-    the same theta, so iteration 0 shares one."""
-    stats = measure_variance(lambda th, rng: first_order(obj, th, rng, size.samples), theta,
-                             batches=size.bias_batches, seed=cp_seed)  # fmt: skip
+def _checkpoint(obj, exact, theta, size: TrainingSize, seed: int, k: int, references: dict) -> dict:
+    """The design's FOPG variance and its bias against the exact reference at theta (iteration
+    k of the run from ``seed``). ``references`` caches the exact references by (seed, k,
+    theta): every design starts from the same theta, so iteration 0 shares one."""
+    estimator = lambda th, rng: first_order(obj, th, rng, size.samples)  # noqa: E731
+    stats = measure_variance(estimator, theta, batches=size.bias_batches,
+                             seed=np.random.SeedSequence([seed, k]))  # fmt: skip
     key = (seed, k, np.asarray(theta, dtype=float).tobytes())
     if key not in references:
         references[key] = reference_gradient(
@@ -260,18 +256,13 @@ def run_task(task: Task, size: TrainingSize, eval_seed: int, bar=None) -> dict:
             if log["diverged_at"] is not None:
                 diverged[str(seed)] = log["diverged_at"]
                 errors[str(seed)] = log["error"]
-            n = len(log["thetas"])
-            returns.append(
-                [exact_return(log["thetas"][k]) if k < n else np.nan for k in eval_iters]
-            )
-            for k in size.checkpoints:
-                if k >= n:
-                    continue
-                theta = log["thetas"][k]
-                cp_seed = np.random.SeedSequence([seed, k])
+            thetas = log["thetas"]
+            returns.append([exact_return(thetas[k]) if k < len(thetas) else np.nan
+                            for k in eval_iters])  # fmt: skip
+            for k in [k for k in size.checkpoints if k < len(thetas)]:
                 try:
                     checkpoints.append(
-                        _checkpoint(obj, exact, theta, size, seed, k, cp_seed, references)
+                        _checkpoint(obj, exact, thetas[k], size, seed, k, references)
                     )
                 except (ValueError, FloatingPointError, UnconvergedStepError) as err:
                     # non-finite or unconverged rollouts: reported
@@ -303,27 +294,21 @@ def _json_list(a: np.ndarray) -> list:
 
 def _bias_by_iteration(checkpoints: list[dict], iterations) -> dict:
     """Per checkpoint iteration: the median resolved bias over seeds, how many seeds resolved
-    it, and the median noise floor and variance."""
+    it, and the median noise floor and variance (None where there is nothing to take)."""
+
+    def median(values: list) -> float | None:
+        return float(np.median(values)) if values else None
+
     out = {}
     for k in iterations:
         cps = [c for c in checkpoints if c["iteration"] == k and "bias" in c]
-        if not cps:
-            out[str(k)] = {"median_bias": None, "resolved": 0, "seeds": 0, "median_noise": None,
-                           "median_relative_bias": None, "median_variance": None}  # fmt: skip
-            continue
-        resolved = [c["bias"]["bias"] for c in cps if c["bias"]["resolved"]]
+        resolved = [c["bias"] for c in cps if c["bias"]["resolved"]]
         out[str(k)] = {
-            "median_bias": float(np.median(resolved)) if resolved else None,
-            "resolved": len(resolved),
-            "seeds": len(cps),
-            "median_noise": float(np.median([c["bias"]["noise"] for c in cps])),
-            "median_relative_bias": (
-                float(np.median([c["bias"]["relative_bias"] for c in cps if c["bias"]["resolved"]]))
-                if resolved
-                else None
-            ),
-            "median_variance": float(np.median([c["variance"] for c in cps])),
-        }
+            "median_bias": median([b["bias"] for b in resolved]), "resolved": len(resolved),
+            "seeds": len(cps), "median_noise": median([c["bias"]["noise"] for c in cps]),
+            "median_relative_bias": median([b["relative_bias"] for b in resolved]),
+            "median_variance": median([c["variance"] for c in cps]),
+        }  # fmt: skip
     return out
 
 
@@ -331,14 +316,12 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     """Train and measure every task of ``config``; write the figures and summary.json to ``out``
     (default results/bias-return); ``summary["files"]`` lists them (absolute paths)."""
     config = config or Config()
-    out = results_dir(NAME, out)
+    out = outputs.results_dir(NAME, out)
     start = time.perf_counter()
     summary = {"config": asdict(config), "tasks": {}, "files": {}}
     sizes = [getattr(config, name) for name in TASKS]
-    bar = progress(
-        total=sum(len(DESIGNS) * len(s.seeds) for s in sizes if s is not None),
-        desc="bias-return: training runs",
-    )
+    runs = sum(len(DESIGNS) * len(s.seeds) for s in sizes if s is not None)
+    bar = outputs.progress(total=runs, desc="bias-return: training runs")
     with warnings.catch_warnings():
         # counted per step (unconverged_training_steps); the warnings themselves are noise here
         warnings.simplefilter("ignore", LCPConvergenceWarning)
@@ -356,53 +339,40 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     summary["seconds"] = time.perf_counter() - start
     summary["files"]["summary"] = out / "summary.json"
     summary["folder"] = str(out)
-    summary["files"] = file_list(summary["files"])
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    summary["files"] = outputs.file_list(summary["files"])
+    outputs.write_json(out / "summary.json", summary)
     return summary
 
 
 def _plot(name: str, result: dict, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, ax = outputs.pyplot().subplots(1, 2, figsize=(12, 4.5))
     for design, d in result["designs"].items():
         it = np.array(d["eval_iterations"])
         mean = np.array(d["return_mean"], dtype=float)
         std = np.array(d["return_std"], dtype=float)
-        line = ax[0].plot(it, mean, label=readable(design))[0]
+        line = ax[0].plot(it, mean, label=outputs.readable(design))[0]
         ax[0].fill_between(it, mean - std, mean + std, alpha=0.2, color=line.get_color())
         ks = sorted(int(k) for k in d["bias_by_iteration"])
         b = [d["bias_by_iteration"][str(k)]["median_bias"] for k in ks]
         noise = [d["bias_by_iteration"][str(k)]["median_noise"] or np.nan for k in ks]
-        ax[1].plot(
-            ks, [np.nan if x is None else x for x in b], "o-", color=line.get_color(),
-            label=readable(design),
-        )  # fmt: skip
-        unresolved = [i for i, x in enumerate(b) if x is None]
-        ax[1].scatter(
-            [ks[i] for i in unresolved], [2 * noise[i] for i in unresolved], marker="v",
-            color=line.get_color(),
-        )  # fmt: skip
-    ax[0].set(
-        xlabel="iteration", ylabel="return on the exact model", title=f"(a) Performance ({name})"
-    )
+        ax[1].plot(ks, [np.nan if x is None else x for x in b], "o-", color=line.get_color(),
+                   label=outputs.readable(design))  # fmt: skip
+        unresolved = [i for i, x in enumerate(b) if x is None]  # drawn at twice their noise
+        ax[1].scatter([ks[i] for i in unresolved], [2 * noise[i] for i in unresolved],
+                      marker="v", color=line.get_color())  # fmt: skip
+    ax[0].set(xlabel="iteration", ylabel="return on the exact model",
+              title=f"(a) Performance ({name})")  # fmt: skip
     ax[1].set(
         xlabel="iteration", ylabel="||E g - grad J_exact|| (median over seeds)", yscale="log",
         title="(b) Gradient bias (triangles: unresolved, below 2 noise)",
     )  # fmt: skip
     ax[0].legend(fontsize=8)
     fig.suptitle("Zhang et al. 2023, Figure 5: barrier smoothing designs for FOPG")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return outputs.save_figure(fig, path, dpi=130)
 
 
-def _fmt(x) -> str:
-    return "n/a" if x is None else f"{x:.4g}"
+def _fmt(x, spec: str = ".4g", none: str = "n/a") -> str:
+    return none if x is None else format(x, spec)
 
 
 def report(summary: dict) -> str:
@@ -412,11 +382,9 @@ def report(summary: dict) -> str:
         for design, d in result["designs"].items():
             it = d["eval_iterations"]
             half = len(it) // 2
-            bias = []
-            for k, b in d["bias_by_iteration"].items():
-                val = "unresolved" if b["median_bias"] is None else f"{b['median_bias']:.3g}"
-                bias.append(f"it {k}: {val} ({b['resolved']}/{b['seeds']}; var "
-                            f"{_fmt(b['median_variance'])})")  # fmt: skip
+            bias = [f"it {k}: {_fmt(b['median_bias'], '.3g', 'unresolved')} ({b['resolved']}/"
+                    f"{b['seeds']}; var {_fmt(b['median_variance'])})"
+                    for k, b in d["bias_by_iteration"].items()]  # fmt: skip
             mean, std = d["return_mean"], d["return_std"]
             lines.append(
                 f"  {design:18s} exact-model return: start {_fmt(mean[0])}, "
