@@ -17,26 +17,22 @@ and Gaussian-matched), side by side in one Drake diagram. Written to the results
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from drake_abs import (  # noqa: E402
-    ContactAware,
-    Exact,
-    Fixed,
-    GaussianMatched,
-    SmoothingPolicy,
-    point_mass_lcs,
-    solve_lcp,
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.experiments.outputs import (
+    file_list,
+    pyplot,
+    readable,
+    results_dir,
+    save_figure,
+    write_json,
 )
-from drake_abs.experiments.outputs import file_list, results_dir  # noqa: E402
+from drake_abs.lcp.ipm import solve_lcp
+from drake_abs.tasks.point_mass import point_mass_lcs
 
 NAME = "bouncing-ball"
 
@@ -75,12 +71,7 @@ class Config:
 
     def labels(self) -> dict[str, str]:
         """Case name -> the readable name the plots and the report use."""
-        out = {"exact": "exact"}
-        for mu in self.bs_mu:
-            out[f"bs_mu={mu:g}"] = f"barrier smoothing, mu = {mu:g}"
-        out["abs_contact_aware"] = "adaptive (ABS), contact-aware"
-        out["abs_gaussian"] = "adaptive (ABS), Gaussian-matched"
-        return out
+        return {name: readable(name) for name in self.cases()}
 
     def cases(self) -> dict[str, SmoothingPolicy]:
         """Case name -> smoothing policy (larger mu = more smoothing)."""
@@ -138,11 +129,8 @@ def step_jacobians(config: Config, states: np.ndarray, smoothing) -> np.ndarray:
 def contact_impulse_curves(config: Config, z: np.ndarray) -> dict[str, np.ndarray]:
     """Impulse lam(z) of each case's policy on a grid of contact distances z (m)."""
     F = np.array([[config.time_step / config.mass]])
-    out = {}
-    for name, policy in config.cases().items():
-        mu = policy.mu(z[:, None], F)
-        out[name] = solve_lcp(F, z[:, None], mu, strict=True).lam[:, 0]
-    return out
+    return {name: solve_lcp(F, z[:, None], policy.mu(z[:, None], F), strict=True).lam[:, 0]
+            for name, policy in config.cases().items()}  # fmt: skip
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
@@ -156,105 +144,80 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
 
         meshcat = Meshcat(MeshcatParams(host="localhost"))
     trajectories = simulate(config, meshcat=meshcat)
-    cases = config.cases()
+    cases, labels = config.cases(), config.labels()
     files = {}
     if meshcat is not None:
         files["meshcat_html"] = out / "bouncing_ball.html"
         files["meshcat_html"].write_text(meshcat.StaticHtml())
-    summary = {"config": asdict(config), "cases": {}}
     jac = {name: step_jacobians(config, trajectories[name], cases[name]) for name in cases}
-    h = config.time_step
+    summary = {"config": asdict(config), "cases": {}}
     for name, xs in trajectories.items():
-        dvy = np.diff(xs[:, 3]) / np.diff(xs[:, 0])
-        impact = (
-            int(np.argmax(xs[1:, 3] > xs[:-1, 3] + 1e-12)) if np.any(np.diff(xs[:, 3]) > 0) else -1
-        )
+        rises = np.diff(xs[:, 3]) > 0
+        impact = int(np.argmax(xs[1:, 3] > xs[:-1, 3] + 1e-12)) if np.any(rises) else -1
         summary["cases"][name] = {
-            "label": config.labels()[name],
+            "label": labels[name],
             "policy": repr(cases[name]),
             "min_height_m": float(xs[:, 1].min()),
             "final_vy_mps": float(xs[-1, 3]),
             "first_upward_velocity_change_at_x_m": None if impact < 0 else float(xs[impact, 0]),
-            "max_dvy_dx_per_s": float(np.max(dvy)),
+            "max_dvy_dx_per_s": float(np.max(np.diff(xs[:, 3]) / np.diff(xs[:, 0]))),
             "max_abs_dvy_plus_dy": float(np.max(np.abs(jac[name][:, 3, 1]))),
-            "dvy_plus_dy_exact_bound_1_over_h": 1.0 / h,
+            "dvy_plus_dy_exact_bound_1_over_h": 1.0 / config.time_step,
         }
     files.update(_plots(out, config, trajectories, jac))
     files["summary"] = out / "summary.json"
     summary["folder"] = str(out)
     summary["files"] = file_list(files)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(files["summary"], summary)
     return summary
 
 
+#: plot name -> its axes' settings (a "yscale" of "symlog" is linear within +-20)
+_AXES = {
+    "vy_vs_x": {"xlabel": "x (m)", "ylabel": "v_y (m/s)",
+                "title": "Vertical velocity along the throw (Fig. 2a)"},
+    "dvy_dx": {"xlabel": "x (m)", "ylabel": "d v_y / d x (1/s)",
+               "title": "Derivative along the throw (Fig. 2b)", "yscale": "symlog"},
+    "step_jacobian": {"xlabel": "x (m)", "ylabel": "|d v_y+ / d y| (1/s)",
+                      "title": "Implicit one-step Jacobian (stiffness)", "yscale": "log"},
+    "contact_impulse": {"xlabel": "contact distance z (m)", "ylabel": "impulse lam (N s)",
+                        "title": "Contact impulse against distance (Fig. 1d)"},
+}  # fmt: skip
+
+
 def _plots(out: Path, config, trajectories, jac) -> dict[str, Path]:
-    z = np.linspace(-0.1, 0.1, 801)
-    curves = contact_impulse_curves(config, z)
-    labels = config.labels()
-
-    def along(xs, ys):
-        return xs[: len(ys), 0], ys
-
-    series = {
-        "vy_vs_x": {n: along(xs, xs[:, 3]) for n, xs in trajectories.items()},
-        "dvy_dx": {
-            n: (0.5 * (xs[1:, 0] + xs[:-1, 0]), np.diff(xs[:, 3]) / np.diff(xs[:, 0]))
-            for n, xs in trajectories.items()
-        },
-        "step_jacobian": {
-            n: along(xs, np.abs(jac[n][:, 3, 1]) + 1e-16) for n, xs in trajectories.items()
-        },
-        "contact_impulse": {n: (z, curves[n]) for n in trajectories},
-    }
-    axes = {
-        "vy_vs_x": {
-            "xlabel": "x (m)",
-            "ylabel": "v_y (m/s)",
-            "title": "Vertical velocity along the throw (Fig. 2a)",
-        },
-        "dvy_dx": {
-            "xlabel": "x (m)",
-            "ylabel": "d v_y / d x (1/s)",
-            "title": "Derivative along the throw (Fig. 2b)",
-            "yscale": "symlog",
-        },
-        "step_jacobian": {
-            "xlabel": "x (m)",
-            "ylabel": "|d v_y+ / d y| (1/s)",
-            "title": "Implicit one-step Jacobian (stiffness)",
-            "yscale": "log",
-            "ylim": (1e-6, 10.0 / config.time_step),
-        },
-        "contact_impulse": {
-            "xlabel": "contact distance z (m)",
-            "ylabel": "impulse lam (N s)",
-            "title": "Contact impulse against distance (Fig. 1d)",
-        },
-    }
-    return {
-        name: _line_plot(out / f"{name}.png", {labels[k]: v for k, v in series[name].items()},
-                         axes[name])
-        for name in series
-    }  # fmt: skip
-
-
-def _line_plot(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], axes: dict) -> Path:
-    """One figure, one line per case in the shared palette (case 0, Exact, drawn thicker)."""
+    """One figure per plot of :data:`_AXES`, one line per case in the scene's palette (case 0,
+    Exact, drawn thicker)."""
     from drake_abs.diagrams.point_mass_scene import palette
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for i, (name, (x, y)) in enumerate(curves.items()):
-        ax.plot(x, y, label=name, color=palette(i), lw=2.2 if i == 0 else 1.5)
-    if axes.get("yscale") == "symlog":
-        ax.set_yscale("symlog", linthresh=20.0)
-        axes = {k: v for k, v in axes.items() if k != "yscale"}
-    ax.set(**axes)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    z = np.linspace(-0.1, 0.1, 801)
+    impulses = contact_impulse_curves(config, z)
+    series = {
+        name: {
+            "vy_vs_x": (xs[:, 0], xs[:, 3]),
+            "dvy_dx": (0.5 * (xs[1:, 0] + xs[:-1, 0]), np.diff(xs[:, 3]) / np.diff(xs[:, 0])),
+            "step_jacobian": (xs[:-1, 0], np.abs(jac[name][:, 3, 1]) + 1e-16),
+            "contact_impulse": (z, impulses[name]),
+        }
+        for name, xs in trajectories.items()
+    }
+    labels, paths = config.labels(), {}
+    for plot, axes in _AXES.items():
+        fig, ax = pyplot().subplots(figsize=(6.4, 4.2))
+        for i, (name, curves) in enumerate(series.items()):
+            x, y = curves[plot]
+            ax.plot(x, y, label=labels[name], color=palette(i), lw=2.2 if i == 0 else 1.5)
+        axes = dict(axes)
+        if axes.get("yscale") == "symlog":
+            ax.set_yscale("symlog", linthresh=20.0)
+            del axes["yscale"]
+        if plot == "step_jacobian":
+            axes["ylim"] = (1e-6, 10.0 / config.time_step)
+        ax.set(**axes)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        paths[plot] = save_figure(fig, out / f"{plot}.png")
+    return paths
 
 
 def report(summary: dict) -> str:

@@ -14,7 +14,6 @@ Failures are reported (every failing case is listed), never hidden.
 from __future__ import annotations
 
 import itertools
-import json
 import tempfile
 import warnings
 from dataclasses import dataclass
@@ -22,8 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.engine import open_loop
+from drake_abs.engine.step_log import StepLog
+from drake_abs.experiments.outputs import file_list, progress, results_dir, write_json
 from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.multibody import build_scene_model
 from drake_abs.multibody.scene import Scene
 
 NAME = "box-convergence"
@@ -109,10 +111,6 @@ def box_scene(folder: Path, friction: float, mass: float, ratio: float, h: float
 def run_case(scene: Scene, steps: int, push: float) -> dict:
     """Step one scene (the engine's open loop, Jacobians on); per-step convergence and
     iterations."""
-    from drake_abs.engine import open_loop
-    from drake_abs.engine.step_log import StepLog
-    from drake_abs.multibody import build_scene_model
-
     sm = build_scene_model(scene)
     log = StepLog(sm.stepper(), ("iterations", "dx_dx"))
     with warnings.catch_warnings():
@@ -136,25 +134,20 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     config = config or Config()
     out = results_dir(NAME, out)
     rows = []
-    axes = (
-        config.policies, config.frictions, config.masses, config.mobility_ratios, config.time_steps
-    )  # fmt: skip
-    grid = itertools.product(*axes)
-    cases = int(np.prod([len(a) for a in axes]))
+    axes = (config.policies, config.frictions, config.masses, config.mobility_ratios,
+            config.time_steps)  # fmt: skip
+    grid = progress(itertools.product(*axes), total=int(np.prod([len(a) for a in axes])),
+                    desc=f"{NAME}: cases")  # fmt: skip
     with tempfile.TemporaryDirectory() as folder:
-        for policy, friction, mass, ratio, h in progress(grid, total=cases, desc=f"{NAME}: cases"):
+        for policy, friction, mass, ratio, h in grid:
             scene = box_scene(Path(folder), friction, mass, ratio, h, policy)
             result = run_case(scene, config.steps, push=2.0 * mass * 9.81 * 0.3)
-            rows.append(
-                {"policy": policy, "friction": friction, "mass": mass, "mobility_ratio": ratio,
-                 "time_step": h, **result}
-            )  # fmt: skip
-    total = sum(r["steps"] for r in rows)
-    converged = sum(r["converged_steps"] for r in rows)
+            rows.append({"policy": policy, "friction": friction, "mass": mass,
+                         "mobility_ratio": ratio, "time_step": h, **result})  # fmt: skip
     summary = {
         "cases": len(rows),
-        "steps": total,
-        "converged_steps": converged,
+        "steps": sum(r["steps"] for r in rows),
+        "converged_steps": sum(r["converged_steps"] for r in rows),
         "failed_cases": [r for r in rows if r["converged_steps"] < r["steps"]],
         "median_iterations": float(np.median([r["median_iterations"] for r in rows])),
         "max_iterations": int(max(r["max_iterations"] for r in rows)),
@@ -162,7 +155,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         "folder": str(out),
         "files": file_list({"summary": out / "summary.json"}),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / "summary.json", summary)
     return summary
 
 
@@ -179,7 +172,3 @@ def report(summary: dict) -> str:
             f"{r['steps'] - r['converged_steps']} of {r['steps']} steps"
         )
     return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    print(report(run(Config.test_size())))

@@ -253,14 +253,11 @@ def friction_experiment(config: Config, rng: np.random.Generator, bar) -> dict:
     stds = np.array([out["rs"][str(int(N))]["std_at_threshold"] for N in Ns])
     c = float(np.exp(np.mean(np.log(stds * np.sqrt(Ns)))))
     per_rollout = np.mean([out["rs"][str(int(N))]["seconds_per_gradient"] / N for N in Ns])
-    out["rs_cost_for_tolerance"] = {}
-    for tol in config.tolerances:
-        N_needed = int(np.ceil((c / (tol * slope)) ** 2))
-        out["rs_cost_for_tolerance"][f"{tol:g}"] = {
-            "samples": N_needed,
-            "simulated_steps": N_needed * T,
-            "seconds_estimated": float(N_needed * per_rollout),
-        }
+    needed = {f"{tol:g}": int(np.ceil((c / (tol * slope)) ** 2)) for tol in config.tolerances}
+    out["rs_cost_for_tolerance"] = {
+        tol: {"samples": N, "simulated_steps": N * T, "seconds_estimated": float(N * per_rollout)}
+        for tol, N in needed.items()
+    }
     out["rs_std_constant"] = c
     best_bs = min(out["bs"].values(), key=lambda b: b["seconds_per_gradient"])
     out["bs_seconds_per_gradient"] = best_bs["seconds_per_gradient"]
