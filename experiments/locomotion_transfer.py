@@ -41,7 +41,6 @@ Outputs in ``out``: ``summary.json``, ``transfer.csv`` (one row per task, policy
 
 from __future__ import annotations
 
-import csv
 import json
 import time
 import warnings
@@ -50,7 +49,18 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments.outputs import file_list, progress, results_dir
+from drake_abs.contact.unconverged import UnconvergedStepWarning
+from drake_abs.experiments import outputs
+from drake_abs.lcp.ipm import LCPConvergenceWarning
+from drake_abs.policy.methods import method
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.saving import save_policy, saved_policy_files
+from drake_abs.policy.training import Adam, train
+from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
+from drake_abs.tasks.episodes import episode_statistics, score_episodes
+from drake_abs.tasks.locomotion import TASKS, locomotion_task
+from drake_abs.tasks.locomotion_training import evaluate
+from drake_abs.tasks.saved_policies import load_policy, reset_state
 
 NAME = "locomotion-transfer"
 TASK_NAMES = ("hopper", "half_cheetah")
@@ -141,15 +151,6 @@ def train_policy(name: str, config: Config, eval_task, folder: Path) -> Path:
     contact as ``config.smoothing``), keep the best iterate by the deterministic return on
     ``eval_task`` (our exact plant) from ``select_episodes`` reset states, and save it to
     ``folder/policies/<name>_fopg_<smoothing>``. Returns the saved JSON's path."""
-    from drake_abs.contact.unconverged import UnconvergedStepWarning
-    from drake_abs.lcp.ipm import LCPConvergenceWarning
-    from drake_abs.policy.methods import method
-    from drake_abs.policy.policies import LinearPolicy
-    from drake_abs.policy.saving import save_policy
-    from drake_abs.policy.training import Adam, train
-    from drake_abs.tasks.locomotion import locomotion_task
-    from drake_abs.tasks.locomotion_training import evaluate
-
     fopg = method("fopg_abs" if config.smoothing == "abs" else "fopg_exact")
     smoothing = (fopg.smoothing_policy(contact_aware=config.contact_aware)
                  if config.smoothing == "abs" else None)  # fmt: skip
@@ -192,8 +193,6 @@ def train_policy(name: str, config: Config, eval_task, folder: Path) -> Path:
 
 def _policies_for(config: Config) -> dict[str, list[Path]]:
     """Task name -> the saved policies of ``config.policies`` that act in it."""
-    from drake_abs.policy.saving import saved_policy_files
-
     found = {name: [] for name in config.tasks}
     if config.policies is None:
         return found
@@ -210,22 +209,17 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     from pydrake.geometry import Meshcat, MeshcatParams
 
     from drake_abs.diagrams.policy_replay import replay_policy_html
-    from drake_abs.policy.policies import LinearPolicy
-    from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
     from drake_abs.reference.mujoco_plant import MujocoStepper
-    from drake_abs.tasks.episodes import episode_statistics, score_episodes
-    from drake_abs.tasks.locomotion import TASKS, locomotion_task
-    from drake_abs.tasks.saved_policies import load_policy, reset_state
 
     config = config or Config()
     config.check()
-    out = results_dir(NAME, out)
+    out = outputs.results_dir(NAME, out)
     start = time.perf_counter()
     saved_paths = _policies_for(config)
     meshcat = Meshcat(MeshcatParams(host="localhost"))
     results: dict = {}
     files: dict[str, Path] = {}
-    bar = progress(total=len(config.tasks), desc=f"{NAME}: tasks")
+    bar = outputs.progress(total=len(config.tasks), desc=f"{NAME}: tasks")
     for name in config.tasks:
         bar.set_postfix_str(name)
         env_id = TASKS[name].env_id
@@ -244,32 +238,25 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
         steppers = {"ours": (None, np.array([reset_state(task, s) for s in config.seeds]))}
         steppers |= {key: (MujocoStepper.from_gymnasium(env_id, frame_skip=skip), x_mujoco)
                      for key, skip in skips.items()}  # fmt: skip
-        paths = saved_paths[name]
-        sources = {p: "saved" for p in paths}
-        if not paths:
-            trained = train_policy(name, config, task, out)
-            paths, sources = [trained], {trained: "trained here"}
-        candidates: dict[str, dict] = {}  # label -> policy, theta, source, file, saved
-        for path in paths:
-            saved = load_policy(path, task=task)
-            candidates[Path(path).name.removesuffix(".json")] = {
-                "policy": saved.policy, "theta": saved.theta, "source": sources[path],
-                "file": str(path), "saved": saved,
-            }  # fmt: skip
+        paths = saved_paths[name] or [train_policy(name, config, task, out)]
+        source = "saved" if saved_paths[name] else "trained here"
+        loaded = {Path(p).name.removesuffix(".json"): (load_policy(p, task=task), str(p))
+                  for p in paths}  # fmt: skip
+        # label -> (policy, theta, source, file)
+        candidates = {label: (sp.policy, sp.theta, source, file)
+                      for label, (sp, file) in loaded.items()}  # fmt: skip
         if config.reference:
             zero = LinearPolicy(task.nx, task.nu)  # zero parameters: the zero action
-            candidates[REFERENCE] = {"policy": zero, "theta": np.zeros(zero.n_params),
-                                     "source": "reference", "file": None}  # fmt: skip
+            candidates[REFERENCE] = (zero, np.zeros(zero.n_params), "reference", None)
         policies = {}
-        for label, c in candidates.items():
-            policies[label] = {"source": c["source"], "file": c["file"], "results": {
-                key: episode_statistics(score_episodes(task, c["policy"], c["theta"], x0s,
-                                                       config.steps, stepper=stepper))
-                for key, (stepper, x0s) in steppers.items()}}  # fmt: skip
-            policies[label]["differences"] = differences(policies[label]["results"])
-        learned = [label for label in policies if label != REFERENCE]
-        best = max(learned, key=lambda lb: policies[lb]["results"]["ours"]["return_mean"])
-        replay = replay_policy_html(candidates[best]["saved"], out / f"{name}_replay.html",
+        for label, (policy, theta, source, file) in candidates.items():
+            stats = {key: episode_statistics(score_episodes(task, policy, theta, x0s, config.steps,
+                                                            stepper=stepper))
+                     for key, (stepper, x0s) in steppers.items()}  # fmt: skip
+            policies[label] = {"source": source, "file": file, "results": stats,
+                               "differences": differences(stats)}  # fmt: skip
+        best = max(loaded, key=lambda lb: policies[lb]["results"]["ours"]["return_mean"])
+        replay = replay_policy_html(loaded[best][0], out / f"{name}_replay.html",
                                     steps=config.replay_steps, seed=config.seeds[0],
                                     meshcat=meshcat)  # fmt: skip
         files[f"{name}_replay"] = replay.path
@@ -286,11 +273,11 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     files["summary"] = out / "summary.json"
     summary = {"config": asdict(config), "tasks": results,
                "seconds": time.perf_counter() - start, "folder": str(out)}  # fmt: skip
-    summary["files"] = file_list(files)
+    summary["files"] = outputs.file_list(files)
     if (out / "policies").is_dir():
         summary["files"]["policies"] = str((out / "policies").resolve())
     summary["explanation"] = {name: explanation(name, results[name]) for name in results}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    outputs.write_json(out / "summary.json", summary, indent=1)
     return summary
 
 
@@ -316,41 +303,25 @@ def differences(results: dict) -> dict:
 
 
 def _write_csv(path: Path, results: dict) -> Path:
-    rows = []
-    for name, r in results.items():
-        for label, entry in r["policies"].items():
-            for key, stats in entry["results"].items():
-                setting = r["settings"][key]
-                rows.append({
-                    "task": name, "policy": label, "source": entry["source"], "setting": key,
-                    "control_period_s": setting["control_period"],
-                    "frame_skip": setting["frame_skip"], "episodes": stats["episodes"],
-                    **{f"{k}_{s}": stats[f"{k}_{s}"]
-                       for k in ("return", "length", "seconds", "forward_velocity",
-                                 "reward_forward", "reward_ctrl", "reward_survive",
-                                 "action_rms", "saturated_fraction")
-                       for s in ("mean", "std")},
-                    "terminated_fraction": stats["terminated_fraction"],
-                    "unconverged_steps": stats["unconverged_steps"],
-                })  # fmt: skip
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    return path
+    keys = ("return", "length", "seconds", "forward_velocity", "reward_forward", "reward_ctrl",
+            "reward_survive", "action_rms", "saturated_fraction")  # fmt: skip
+    return outputs.write_csv(path, [
+        {"task": name, "policy": label, "source": entry["source"], "setting": key,
+         "control_period_s": r["settings"][key]["control_period"],
+         "frame_skip": r["settings"][key]["frame_skip"], "episodes": stats["episodes"],
+         **{f"{k}_{s}": stats[f"{k}_{s}"] for k in keys for s in ("mean", "std")},
+         "terminated_fraction": stats["terminated_fraction"],
+         "unconverged_steps": stats["unconverged_steps"]}
+        for name, r in results.items() for label, entry in r["policies"].items()
+        for key, stats in entry["results"].items()])  # fmt: skip
 
 
 def _plot(path: Path, results: dict, config: Config) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     metrics = (("return", "return over the episode"),
                ("forward_velocity", "forward distance per second (m/s)"),
                ("seconds", "episode duration (s)"))  # fmt: skip
-    fig, axes = plt.subplots(len(metrics), len(results), figsize=(6.5 * len(results), 9),
-                             squeeze=False)  # fmt: skip
+    size = (6.5 * len(results), 9)
+    fig, axes = outputs.pyplot().subplots(len(metrics), len(results), figsize=size, squeeze=False)
     width = 0.8 / len(SETTINGS)
     for col, r in enumerate(results.values()):
         labels = list(r["policies"])
@@ -372,10 +343,7 @@ def _plot(path: Path, results: dict, config: Config) -> Path:
                 ax.legend(fontsize=7)
     fig.suptitle("Policies trained on our plant, run on it and in gymnasium's MuJoCo "
                  "environments (mean +- std over reset seeds)")  # fmt: skip
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return outputs.save_figure(fig, path)
 
 
 def explanation(name: str, r: dict) -> str:
@@ -434,10 +402,10 @@ def report(summary: dict) -> str:
         for label, entry in r["policies"].items():
             lines.append(f"  policy {label} ({entry['source']}):")
             for key, st in entry["results"].items():
-                period = r["settings"][key]["control_period"]
+                setting = f"{SETTINGS[key]} ({r['settings'][key]['control_period'] * 1e3:g} ms)"
                 unconverged = st["unconverged_steps"]
                 lines.append(
-                    f"    {SETTINGS[key] + f' ({period * 1e3:g} ms)':42s} return "
+                    f"    {setting:42s} return "
                     f"{st['return_mean']:9.2f} +- {st['return_std']:7.2f}   length "
                     f"{st['length_mean']:6.1f} +- {st['length_std']:5.1f} steps "
                     f"({st['seconds_mean']:5.2f} s)   forward "
@@ -446,10 +414,9 @@ def report(summary: dict) -> str:
                     + f" ({100 * st['saturated_fraction_mean']:.0f} % beyond +-1)"
                     + (f"   unconverged steps {unconverged}" if unconverged else "")
                 )
-            d = entry["differences"]
             for part, title in (("time_step", "control period (c) - (b)"),
                                 ("simulator", "simulator (a) - (c)")):  # fmt: skip
-                p = d[part]
+                p = entry["differences"][part]
                 lines.append(
                     f"    {title:26s} return {p['return']:+9.2f} = forward "
                     f"{p['reward_forward']:+.2f} + control {p['reward_ctrl']:+.2f} + survive "
@@ -457,11 +424,9 @@ def report(summary: dict) -> str:
                     f"{p['seconds']:+.2f} s"
                 )
         rep = r["replay"]
-        lines.append(
-            f"  replay of {rep['policy']} on our plant (seed {rep['seed']}, {rep['steps']} steps, "
-            f"return {rep['return']:.2f}): {rep['html']}"
-        )
-        lines.append("  why: " + summary["explanation"][name])
+        lines += [f"  replay of {rep['policy']} on our plant (seed {rep['seed']}, {rep['steps']} "
+                  f"steps, return {rep['return']:.2f}): {rep['html']}",
+                  "  why: " + summary["explanation"][name]]  # fmt: skip
     return "\n".join(lines)
 
 
