@@ -186,7 +186,7 @@ _AXES = {
 
 
 def _plots(out: Path, config, trajectories, jac) -> dict[str, Path]:
-    """One figure per plot of :data:`_AXES`, one line per case in the scene's palette (case 0,
+    """One figure per plot of ``_AXES``, one line per case in the scene's palette (case 0,
     Exact, drawn thicker)."""
     from drake_abs.diagrams.point_mass_scene import palette
 

@@ -20,7 +20,7 @@ from drake_abs.learning.ground_toy import GroundToy
 #: The losses by name.
 KINDS = ("explicit", "violation")
 
-#: (z (n,), v (n,), y (n,)): heights (m), velocities (m/s), next velocities (m/s).
+#: A data set (z, v, y) of heights in m, velocities and next velocities in m/s, each (n,).
 Data = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
@@ -33,10 +33,11 @@ def _kind(kind: str) -> str:
 def sample_near_ground(
     toy: GroundToy, rng: np.random.Generator, n: int, *, noise: float, near: float
 ) -> Data:
-    """n data points at the true height 0: :meth:`GroundToy.sample` (heights uniform in
-    [0, phi_max], which puts about 1% of the points in contact) with a fraction ``near`` in
-    [0, 1] redrawn within one step's travel of the ground, ``[0, 2 v_max dt]``, and their next
-    velocity from the exact model plus Gaussian noise ``noise`` (m/s)."""
+    """n data points at the true height 0:
+    :meth:`~drake_abs.learning.ground_toy.GroundToy.sample` (heights uniform in [0, phi_max],
+    which puts about 1% of the points in contact) with a fraction ``near`` in [0, 1] redrawn
+    within one step's travel of the ground, ``[0, 2 v_max dt]``, and their next velocity from
+    the exact model plus Gaussian noise ``noise`` (m/s)."""
     if not 0.0 <= near <= 1.0:
         raise ValueError(f"near must be a fraction in [0, 1]; got {near!r}")
     z, v, y = toy.sample(rng, as_count(n, "n", minimum=1), 0.0, noise)

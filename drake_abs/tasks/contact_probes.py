@@ -6,7 +6,7 @@ compare smoothings.
   ``drop_speed`` (m/s); the response is its vertical velocity after ``steps`` steps (m/s) and
   its derivative in y0 (1/s). Masses starting at or below :func:`drop_contact_height` have
   landed (inelastic: v = 0), those above are still falling, so the exact derivative is a ramp of
-  slope -1/h and width about |v| h at that height, 0 elsewhere.
+  slope -1/h and width about ``|v| h`` at that height, 0 elsewhere.
 - :func:`push_response`: a :class:`~drake_abs.tasks.box_lcs.TranslatingBox` resting on the
   ground is pushed by a constant force u (N) for ``steps`` steps; the response is its final
   position (m) and its derivative in u (m/N): 0 below the friction threshold ``friction m g``,
