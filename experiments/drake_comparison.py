@@ -127,7 +127,7 @@ def roll(stepper, x0, u, steps: int, jacobians: bool = False):
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
     """||a - b|| / ||b|| (Frobenius)."""
     nb = np.linalg.norm(b)
-    return float(np.linalg.norm(a - b) / nb) if nb > 0 else float(np.linalg.norm(a - b))
+    return float(np.linalg.norm(a - b) / (nb if nb > 0 else 1.0))
 
 
 def _steps(duration: float, h: float) -> int:
@@ -168,8 +168,7 @@ def simulate_scene(scene: str, h: float, config: Config, *, gradients: bool,
                 raise RuntimeError(f"{name}: the gradient and the plain rollouts disagree")
             entry["dx_dx0"] = g.dxH_dx0[0]
             # the box's u: the push (held: the sum over steps); the ball's: its initial v_y
-            du = g.dxH_du[0].sum(axis=0) if scene == "box" else g.dxH_dx0[0][:, 7:8].copy()
-            entry["dx_du"] = du
+            entry["dx_du"] = g.dxH_du[0].sum(axis=0) if scene == "box" else g.dxH_dx0[0][:, 7:8]
 
             def final(delta, x0=x0, stepper=stepper):
                 x = x0.copy()

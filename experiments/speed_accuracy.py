@@ -173,13 +173,9 @@ def scene_inputs(scene: str) -> dict:
     if scene in _SPECIAL:
         return {"rows": rows, **_SPECIAL[scene]}
     nq, first, last = plant.num_positions(), prismatic[0], prismatic[-1]
-    return {
-        "rows": rows,
-        "x0_columns": (nq + first.velocity_start(), nq + last.velocity_start()),
-        "push": False,
-        "names": (f"v_{first.name()}_0", f"v_{last.name()}_0"),
-        "analytic": (),
-    }
+    return {"rows": rows, "x0_columns": (nq + first.velocity_start(), nq + last.velocity_start()),
+            "push": False, "names": (f"v_{first.name()}_0", f"v_{last.name()}_0"),
+            "analytic": ()}  # fmt: skip
 
 
 def _scene_spec(scene: str, config: Config, time_step: float | None = None):
