@@ -4,6 +4,8 @@
   impulses, batched, with its gradient in the parameters;
 - :mod:`~drake_abs.learning.ground_toy`: the 1-D point mass whose ground height is learned, with
   its explicit, naive-implicit and violation-implicit losses;
+- :mod:`~drake_abs.learning.ground_height_fit`: the toy's height learned from data: near-ground
+  data, mean losses and their landscapes, the fitted height and gradient descent;
 - :mod:`~drake_abs.learning.generalization`: the losses' Lipschitz constants and the
   generalisation bound of Bianchini et al.'s Theorem 1;
 - :mod:`~drake_abs.learning.scene_losses`: the explicit (eq. 6.1 of Zhang et al.), naive-implicit
