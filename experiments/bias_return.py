@@ -336,10 +336,8 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
             summary["tasks"][name] = result
             summary["files"][f"figure5_{name}"] = _plot(name, result, out / f"figure5_{name}.png")
     bar.close()
-    summary["seconds"] = time.perf_counter() - start
-    summary["files"]["summary"] = out / "summary.json"
-    summary["folder"] = str(out)
-    summary["files"] = outputs.file_list(summary["files"])
+    summary |= {"seconds": time.perf_counter() - start, "folder": str(out)}
+    summary["files"] = outputs.file_list({**summary["files"], "summary": out / "summary.json"})
     outputs.write_json(out / "summary.json", summary)
     return summary
 

@@ -167,13 +167,13 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     x_ours = true_task.initial_states(np.random.default_rng([config.seed, 3]), config.eval_episodes)
 
     def evaluate(theta_pi) -> dict:
-        mujoco_stats = episode_statistics(score_episodes(
-            true_task, true_task.policy(inner), theta_pi, x_mujoco, config.eval_steps,
-            stepper=mujoco))  # fmt: skip
+        policy = true_task.policy(inner)
+        episodes = score_episodes(true_task, policy, theta_pi, x_mujoco, config.eval_steps,
+                                  stepper=mujoco)  # fmt: skip
+        st = episode_statistics(episodes)
         ours = our_return(true_task, theta_pi, x_ours, config.eval_steps)
-        return {"mujoco_return": mujoco_stats["return_mean"],
-                "mujoco_return_std": mujoco_stats["return_std"],
-                "mujoco_length": mujoco_stats["length_mean"], "our_return": ours}  # fmt: skip
+        return {"mujoco_return": st["return_mean"], "mujoco_return_std": st["return_std"],
+                "mujoco_length": st["length_mean"], "our_return": ours}  # fmt: skip
 
     # round 0: random inputs in MuJoCo
     source, effort = mujoco_source(build_scene_model(scene)), model.effort

@@ -304,16 +304,13 @@ def reference(scene: str, config: Config, spec: dict) -> tuple[np.ndarray, np.nd
     xs = states(h, x0, u)
     widths = (config.fd_half_width[SCENES.index(scene)] if scene in SCENES
               else (config.articulated_half_width,) * 2)  # fmt: skip
-    cols = []
-    for j, width in enumerate(widths):
-        deltas = np.linspace(-width, width, config.fd_points)
-        finals = []
+    cols, n_x0 = [], len(spec["x0_columns"])
+    for j, width in enumerate(widths):  # input j: column j of x0 or, past them, the push
+        deltas, finals = np.linspace(-width, width, config.fd_points), []
         for d in deltas:
-            x, push = x0.copy(), u.copy()
-            if j < len(spec["x0_columns"]):
+            x, push = x0.copy(), (u + d if j >= n_x0 else u)
+            if j < n_x0:
                 x[spec["x0_columns"][j]] += d
-            else:
-                push = push + d
             finals.append(states(h, x, push)[-1])
         cols.append(np.polyfit(deltas, np.array(finals), 1)[0])  # the least-squares slope
     G_ref = np.stack(cols, axis=1)[list(spec["rows"])]
