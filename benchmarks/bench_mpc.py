@@ -29,16 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.experiments import mpc_quadcopter as task
 from drake_abs.mpc.graybox import TrackingCost, closed_loop
 from drake_abs.mpc.qp_mpc import MpcSpec, QpMpc, riccati_terminal_cost, theta_from_cost
 from drake_abs.tasks import quadcopter as qc
 
 PRM = qc.QuadcopterParams()
 # the Zuliani et al. (2025) task of drake-abs experiment mpc-quadcopter
-X_REF = np.array(task.X_REF)
-Q_D = np.array(task.STAGE_Q)
-R_D = np.array(task.STAGE_R)
+X_REF = np.array(qc.TRACKING_TARGET)
+Q_D = np.array(qc.TRACKING_STAGE_Q)
+R_D = np.array(qc.TRACKING_STAGE_R)
 
 
 def setup():
@@ -48,10 +47,10 @@ def setup():
     spec = MpcSpec(A, B, 12, X_REF, PRM.hover_input(), u_min, u_max, x_min, x_max)
     P, _ = riccati_terminal_cost(A, B, np.diag(Q_D), np.diag(R_D))
     theta = theta_from_cost(Q_D, R_D, P)
-    P_c = np.diag(task.TERMINAL_P)
+    P_c = np.diag(qc.TRACKING_TERMINAL_P)
     cost = TrackingCost(
         np.diag(Q_D), np.diag(R_D), P_c, X_REF, PRM.hover_input(), x_min, x_max,
-        task.Config().penalty_weight,
+        qc.TRACKING_PENALTY,
     )  # fmt: skip
     return spec, theta, cost
 

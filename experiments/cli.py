@@ -56,9 +56,7 @@ def positive_int(option: str, example: str = "100"):
         try:
             value = int(text, 10)
         except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected a positive whole number such as {example}, got {text!r}"
-            ) from None
+            value = 0
         if value <= 0:
             raise argparse.ArgumentTypeError(
                 f"expected a positive whole number such as {example}, got {text!r}"

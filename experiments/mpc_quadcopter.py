@@ -60,10 +60,8 @@ from drake_abs.tasks import quadcopter as qc
 NAME = "mpc-quadcopter"
 PAPER_TRAINED_COST = 1111.71
 PAPER_EXACT_MODEL_COST = 1103.04
-X_REF = (-6.0, -3.5, 0.0) + (0.0,) * 9
-STAGE_Q = (1.0,) * 6 + (0.1,) * 6
-STAGE_R = (0.01,) * 4
-TERMINAL_P = (1.0,) * 6 + (1e3,) * 3 + (1.0,) * 3
+X_REF, STAGE_Q, STAGE_R = qc.TRACKING_TARGET, qc.TRACKING_STAGE_Q, qc.TRACKING_STAGE_R
+TERMINAL_P = qc.TRACKING_TERMINAL_P
 SYSID_SPREAD = (0.5, 0.5, 0.5, 0.2, 0.2, 0.2, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05)
 
 
@@ -107,7 +105,7 @@ class Config:
     sysid_spread: tuple[float, ...] = SYSID_SPREAD
     delta: float = 1e-4
     theta_bound: float = 100.0
-    penalty_weight: float = 300.0
+    penalty_weight: float = qc.TRACKING_PENALTY
     slack_penalty: float = 25.0
     seed: int = 0
     meshcat: bool = True
