@@ -236,3 +236,19 @@ def test_bad_hydroelastic_settings_are_named(models):
         DrakePlantStepper(scene, hydroelastic={"modulus": 1e7, "ground_thickness": -0.1})
     with pytest.raises(ValueError, match="ground contacts only"):
         DrakePlantStepper("pusher_box", hydroelastic={"modulus": 1e7})
+
+
+def test_record_keeps_the_steppers_jacobians(models):
+    """engine.record over Drake's plant stores each step's AutoDiffXd Jacobians as they are."""
+    from drake_abs.engine import record
+
+    sm = models["box_push"]
+    stepper = DrakePlantStepper(sm.scene, "lagged")
+    policy = LinearPolicy(nx=6, nu=1)
+    reward = QuadraticReward(Q=np.eye(6), R=np.eye(1), x_goal=np.zeros(6))
+    theta = np.random.default_rng(3).normal(scale=0.1, size=policy.n_params)
+    tape = record(stepper, policy, theta, sm.x0, np.zeros((1, 10, 1)), reward, sigma=0.0)
+    for t in (0, 9):
+        step = stepper.step(tape.x[0, t], tape.u[0, t])
+        np.testing.assert_array_equal(tape.dx_dx[0, t], step.dx_dx)
+        np.testing.assert_array_equal(tape.dx_du[0, t], step.dx_du)
