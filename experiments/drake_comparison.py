@@ -65,8 +65,8 @@ def label(name: str) -> str:
 @dataclass(frozen=True)
 class Config(cs.ComparisonScenes):
     """Settings (SI units: s, m, kg, N); the scenes' own (friction, speeds, durations, ABS,
-    Drake's material) are those of :class:`~drake_abs.reference.comparison_scenes.
-    ComparisonScenes`. Larger mu is more smoothing.
+    Drake's material) are those of
+    :class:`~drake_abs.reference.comparison_scenes.ComparisonScenes`. Larger mu is more smoothing.
 
     Attributes:
         fine_time_step: a smaller h for the trajectory metrics only (None: skip).

@@ -57,9 +57,9 @@ from drake_abs.policy.controls import episode_seed, push_inputs, sinusoid_inputs
 NAME = "model-learning"
 SCENES = ("box_push", "gym_hopper", "gym_half_cheetah")
 SOURCES = ("sap", "mujoco")
-#: The scripted inputs: the box's pushes (up to 12 N: it slides beyond mu m g = 4.9 N and sticks
-#: below it), the locomotion scenes' gaits (a share of each motor's effort limit, Hz).
+#: The box's scripted pushes, up to 12 N (it slides beyond mu m g = 4.9 N and sticks below it).
 PUSH = 12.0
+#: The locomotion scenes' scripted gaits (a share of each motor's effort limit, Hz).
 GAITS = {"gym_hopper": (0.3, 2.0), "gym_half_cheetah": (0.5, 2.5)}
 #: The box's initial-state noise, as half-widths of the position offset (m), the tilt (rad),
 #: the lift (m) and the velocity (m/s, m/s, rad/s); its half length and half height (m).

@@ -138,7 +138,8 @@ class Setting:
 
     @property
     def name(self) -> str:
-        """The family's display name: ours by the smoothing registry, Drake's approximation."""
+        """The family's display name (ours by the smoothing registry, Drake's by its
+        approximation)."""
         if self.family in SMOOTHINGS:
             return f"ours, {SMOOTHINGS[self.family]}"
         return f"ours, {GAUSSIAN}" if self.ours else f"Drake {APPROXIMATION_LABELS[self.family]}"

@@ -69,8 +69,8 @@ class Predictor:
     @classmethod
     def of_ensemble(cls, ensemble) -> Predictor:
         """The mean over an ensemble's members (``ensemble.size`` of them,
-        ``ensemble.predict(x, u, members (B,))``, e.g. :class:`drake_abs.policy.mbpo.
-        MlpEnsemble`), always converged."""
+        ``ensemble.predict(x, u, members (B,))``, e.g.
+        :class:`drake_abs.policy.mbpo.MlpEnsemble`), always converged."""
 
         def predict(x, u):
             B = x.shape[0]

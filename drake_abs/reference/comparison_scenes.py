@@ -34,7 +34,8 @@ __all__ = [
 SCENES = ("box", "ball")
 GRAVITY = 9.81  # m/s^2
 BOX_HALF = (0.2, 0.1)  # half length (x) and half height (z) of the box, m
-BALL_RADIUS = 0.05  # m
+#: The ball's radius, m.
+BALL_RADIUS = 0.05
 
 
 @dataclass(frozen=True)

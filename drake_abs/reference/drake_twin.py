@@ -49,14 +49,14 @@ APPROXIMATIONS = {
     "lagged": DiscreteContactApproximation.kLagged,
 }
 
-#: Display names of the approximations (tables, plots: "Drake SAP").
+#: Display names of the approximations in tables and plots ("SAP" as in "Drake SAP").
 APPROXIMATION_LABELS = {"sap": "SAP", "similar": "Similar", "lagged": "Lagged"}
 
 #: Radius (m) of the collision sphere standing in for a point contact (radius 0).
 POINT_RADIUS = 1e-3
 
-#: Hydroelastic settings and their defaults: the compliant shapes' hydroelastic modulus (Pa,
-#: required), the meshes' resolution hint (m) and the rigid ground box's thickness (m).
+#: Hydroelastic settings and their defaults, namely the compliant shapes' hydroelastic modulus
+#: (Pa, required), the meshes' resolution hint (m) and the rigid ground box's thickness (m).
 HYDROELASTIC_DEFAULTS = {"modulus": None, "resolution_hint": 0.05, "ground_thickness": 0.1}
 #: Width (m) of the rigid hydroelastic ground box (square).
 HYDROELASTIC_GROUND_WIDTH = 20.0

@@ -1,8 +1,9 @@
 """Our scenes in the reference simulators, as sources of transition data: a scene's Drake twin
 (:class:`~drake_abs.reference.drake_plant.DrakePlantStepper`, SAP / Similar / Lagged) and its
-MuJoCo counterpart (:data:`MUJOCO_MODELS`: gymnasium's ``Hopper-v5`` and ``HalfCheetah-v5`` as
-published, and this package's ``models/box_planar.xml`` for ``box_push``), each a stepper in the
-scene's own coordinates, checked against the scene's plant, with a contact probe.
+MuJoCo counterpart (:data:`~drake_abs.reference.scene_sources.MUJOCO_MODELS`: gymnasium's
+``Hopper-v5`` and ``HalfCheetah-v5`` as published, and this package's ``models/box_planar.xml``
+for ``box_push``), each a stepper in the scene's own coordinates, checked against the scene's
+plant, with a contact probe.
 
 Coordinates: x = the scene's (q, v), entry by entry (the twin's positions, velocities and
 actuators are the scene's by name and order, :func:`check_drake_coordinates`; MuJoCo's one-dof
@@ -51,9 +52,9 @@ __all__ = [
     "whole_frame_skip",
 ]
 
-#: Our scenes' MuJoCo counterparts: a gymnasium environment id, or a model file of this package
-#: (the box of ``box_push``'s SDF with the scene's contact points as 1 mm spheres over a floor
-#: lowered by their radius, friction 0.5, pyramidal cone, Euler at 0.01 s).
+#: Our scenes' MuJoCo counterparts, each a gymnasium environment id or a model file of this
+#: package (the box of ``box_push``'s SDF with the scene's contact points as 1 mm spheres over a
+#: floor lowered by their radius, friction 0.5, pyramidal cone, Euler at 0.01 s).
 MUJOCO_MODELS = {
     "box_push": "models/box_planar.xml",
     "gym_hopper": "Hopper-v5",

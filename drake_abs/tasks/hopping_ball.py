@@ -26,11 +26,16 @@ from drake_abs.tasks.point_mass import point_mass_lcs
 
 __all__ = ["SPRING", "TIME_STEP", "X0", "Y_EQ", "Y_GOAL", "hopping_ball", "spring_theta"]
 
-TIME_STEP = 0.01  # s
-SPRING = 100.0  # N/m
-Y_EQ = 0.1  # m
-X0 = (0.0, 0.3, 0.5, 0.0)  # (p_x, p_y, v_x, v_y) in m and m/s
-Y_GOAL = 0.2  # m
+#: The time step h, s.
+TIME_STEP = 0.01
+#: The spring policy's stiffness k_s, N/m.
+SPRING = 100.0
+#: The spring policy's rest height y_eq, m.
+Y_EQ = 0.1
+#: The initial state (p_x, p_y, v_x, v_y), in m and m/s.
+X0 = (0.0, 0.3, 0.5, 0.0)
+#: The height p_y the reward tracks, m.
+Y_GOAL = 0.2
 
 
 def hopping_ball(

@@ -284,9 +284,10 @@ class QuadcopterStepper:
         return step(x, u, self.params, jacobians=jacobians)
 
 
-#: The tracking task of Zuliani et al. 2025, section 7: the target state (m, rad, m/s, rad/s;
-#: position (-6, -3.5, 0), at rest), the diagonals of the stage weights Q (12) and R (4), of the
-#: terminal weight P (12), and the weight of the constraint violation's 1-norm in the cost.
+#: The tracking task of Zuliani et al. 2025, section 7, as the target state (m, rad, m/s,
+#: rad/s; position (-6, -3.5, 0), at rest), the diagonals of the stage weights Q (12) and R (4),
+#: of the terminal weight P (12), and the weight of the constraint violation's 1-norm in the
+#: cost.
 TRACKING_TARGET = (-6.0, -3.5, 0.0) + (0.0,) * 9
 TRACKING_STAGE_Q = (1.0,) * 6 + (0.1,) * 6
 TRACKING_STAGE_R = (0.01,) * 4
