@@ -106,7 +106,7 @@ def run_pair(
     model = build_scene_model(scene)
     smoothing = SMOOTHINGS[smoothing_name]
     if smoothing is None:
-        smoothing = scene.smoothing_policy()
+        smoothing = scene.make_smoothing()
         if not isinstance(smoothing, ContactAware):
             smoothing = ContactAware(1e-3, 0.02)
     stepper = model.stepper(smoothing=smoothing, friction=friction)

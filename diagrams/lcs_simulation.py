@@ -11,14 +11,14 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from drake_abs.contact.lcs import LCS, GradientMode
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.systems import LcsPlant, autodiff
 
 
 def add_lcs_plant(
     builder: DiagramBuilder,
     lcs: LCS,
-    smoothing: SmoothingPolicy | None = None,
+    smoothing: Smoothing | None = None,
     *,
     gradient: GradientMode = "total",
     u=None,
@@ -36,7 +36,7 @@ def add_lcs_plant(
 
 def make_lcs_diagram(
     lcs: LCS,
-    smoothing: SmoothingPolicy | None = None,
+    smoothing: Smoothing | None = None,
     *,
     gradient: GradientMode = "total",
     u=None,

@@ -1,4 +1,4 @@
-"""A diagram that runs several smoothing policies on the same point-mass LCS side by side, with
+"""A diagram that runs several smoothing designs on the same point-mass LCS side by side, with
 logging and (optionally) Meshcat drawing: the bouncing ball of Zhang et al. 2023, Figure 1a."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from drake_abs.contact.lcs import LCS
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.diagrams.lcs_simulation import add_lcs_plant
 from drake_abs.systems import LcsPlant, PointMassVisualizer
 
@@ -40,7 +40,7 @@ class PointMassScene:
 
 def make_point_mass_scene(
     lcs: LCS,
-    cases: dict[str, SmoothingPolicy],
+    cases: dict[str, Smoothing],
     *,
     dim: int,
     u=None,
@@ -49,11 +49,11 @@ def make_point_mass_scene(
     radius: float = 0.03,
 ) -> PointMassScene:
     """One LcsPlant (stepped every ``lcs.time_step`` s) per entry of ``cases`` (name ->
-    smoothing policy), all fed the same constant input ``u`` (zero by default), each logged
+    smoothing), all fed the same constant input ``u`` (zero by default), each logged
     every step; with ``meshcat``, a ground slab and one coloured ball per case, spaced
     ``spacing`` m apart in depth."""
     if not cases:
-        raise ValueError("cases must name at least one smoothing policy")
+        raise ValueError("cases must name at least one smoothing")
     time_step = lcs.time_step
     if time_step is None:
         raise ValueError("lcs.time_step is None: build the LCS with its time step")

@@ -17,7 +17,7 @@ from pathlib import Path
 from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_abs.contact.unconverged import UnconvergedPolicy
+from drake_abs.contact.unconverged import OnUnconverged
 from drake_abs.multibody.builder import build_scene_model
 from drake_abs.multibody.scene import Scene
 from drake_abs.systems import ComplementarityPlant
@@ -27,7 +27,7 @@ def AddComplementarityPlantSceneGraph(
     builder: DiagramBuilder,
     scene: Scene | str | Path,
     *,
-    on_unconverged: UnconvergedPolicy = "drop",
+    on_unconverged: OnUnconverged = "drop",
     plant_name: str = "plant",
     scene_graph_name: str = "scene_graph",
     **stepper_options,

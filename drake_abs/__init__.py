@@ -4,7 +4,7 @@ The numerical core, one subpackage per concept, each layer importing only the on
 this list (``docs/architecture.md``; ``tests/test_layers.py`` holds the table):
 
 - :mod:`drake_abs.lcp`: the softened LCP, its interior-point solver and Jacobians;
-- :mod:`drake_abs.contact`: smoothing policies, linear complementarity systems, the rigid-body
+- :mod:`drake_abs.contact`: smoothing designs, linear complementarity systems, the rigid-body
   time-stepping LCP, the one step record;
 - :mod:`drake_abs.engine`: the one closed-loop engine (stepper, policy and reward protocols,
   batched rollouts and their reverse pass);
@@ -45,7 +45,7 @@ from drake_abs.contact import (
     Fixed,
     GaussianMatched,
     LcsStepper,
-    SmoothingPolicy,
+    Smoothing,
     Step,
     TimeStepScaled,
 )
@@ -105,7 +105,7 @@ __all__ = [
     "LCPResult",
     "LCPStatus",
     "MatrixClass",
-    "SmoothingPolicy",
+    "Smoothing",
     "TimeStepScaled",
     "point_mass_lcs",
     "record",

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.contact.lcs import GradientMode
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.engine import rollout
 from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.lcp.ipm import LCPConvergenceWarning
@@ -82,14 +82,14 @@ class Config:
         return cls(rollouts=8, iterations=12, learning_rate=0.03, seeds=(0, 1), landscape_points=41)
 
 
-def smoothing_for(name: str, config: Config) -> SmoothingPolicy:
+def smoothing_for(name: str, config: Config) -> Smoothing:
     """The contact smoothing of a method's model (``zopg`` and ``fopg_exact``: exact)."""
-    return method(name).smoothing_policy(
+    return method(name).make_smoothing(
         mu=config.bs_mu, contact_aware=(config.abs_mu_max, config.abs_length)
     )
 
 
-def objective(config: Config, smoothing: SmoothingPolicy | None = None) -> PolicyObjective:
+def objective(config: Config, smoothing: Smoothing | None = None) -> PolicyObjective:
     """The throw (:func:`~drake_abs.tasks.ball_throw.throw_objective`) with the config's sizes
     and ``config.gradient``, on the model smoothed by ``smoothing`` (default: exact)."""
     sizes = ("height", "speed", "radius", "mass", "friction", "time_step", "horizon", "goal",

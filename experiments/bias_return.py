@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, Smoothing
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 from drake_abs.experiments import outputs
 from drake_abs.lcp.ipm import LCPConvergenceWarning
@@ -61,7 +61,7 @@ from drake_abs.tasks.hopping_ball import hopping_ball, spring_theta
 NAME = "bias-return"
 TASKS = ("hopping_ball", "half_cheetah", "gym_half_cheetah")
 
-DESIGNS: dict[str, SmoothingPolicy] = {
+DESIGNS: dict[str, Smoothing] = {
     "BS mu=1e-10": Fixed(1e-10),
     "BS mu=1e-2": Fixed(1e-2),
     "ABS contact-aware": ContactAware(mu_max=1e-2, length=0.05),
@@ -177,7 +177,7 @@ def _scene_half_cheetah():
     return objective, np.zeros(policy.n_params)
 
 
-def train_design(task: Task, smoothing: SmoothingPolicy, size: TrainingSize, seed: int) -> dict:
+def train_design(task: Task, smoothing: Smoothing, size: TrainingSize, seed: int) -> dict:
     """Adam on FOPG from ``task.theta0``; returns the log and theta at every iteration.
 
     A run whose rollouts leave the finite numbers (the policy drove the state to inf or NaN, the

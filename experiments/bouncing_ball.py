@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, Smoothing
 from drake_abs.experiments.outputs import (
     file_list,
     pyplot,
@@ -73,9 +73,9 @@ class Config:
         """Case name -> the readable name the plots and the report use."""
         return {name: readable(name) for name in self.cases()}
 
-    def cases(self) -> dict[str, SmoothingPolicy]:
-        """Case name -> smoothing policy (larger mu = more smoothing)."""
-        out: dict[str, SmoothingPolicy] = {"exact": Exact()}
+    def cases(self) -> dict[str, Smoothing]:
+        """Case name -> smoothing (larger mu = more smoothing)."""
+        out: dict[str, Smoothing] = {"exact": Exact()}
         for mu in self.bs_mu:
             out[f"bs_mu={mu:g}"] = Fixed(mu)
         out["abs_contact_aware"] = ContactAware(mu_max=self.abs_mu_max, length=self.abs_length)

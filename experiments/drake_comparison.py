@@ -30,7 +30,7 @@ import numpy as np
 from drake_abs.engine import open_loop
 from drake_abs.experiments import outputs
 from drake_abs.multibody import build_scene_model
-from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
+from drake_abs.policy.methods import SMOOTHINGS, make_smoothing
 from drake_abs.reference import comparison_scenes as cs
 from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.reference.drake_twin import APPROXIMATION_LABELS
@@ -109,7 +109,7 @@ def steppers(scene: str, h: float, config: Config, ours: bool = True) -> dict:
         out["sap_hydroelastic"] = DrakePlantStepper(spec, "sap", **drake, hydroelastic=hydro)
     i, scale = cs.SCENES.index(scene), h / config.time_step
     for design in OURS if ours else ():
-        smoothing = smoothing_policy(design, mu=config.bs_mu[i] * scale,
+        smoothing = make_smoothing(design, mu=config.bs_mu[i] * scale,
                                      contact_aware=(config.abs_mu_max[i] * scale,
                                                     config.abs_length[i]))  # fmt: skip
         out[design] = build_scene_model(spec).stepper(smoothing=smoothing, gradient="total")

@@ -34,7 +34,7 @@ import numpy as np
 
 from drake_abs.experiments.outputs import file_list, progress, results_dir
 from drake_abs.policy.mbpo import MbpoConfig
-from drake_abs.policy.methods import method, smoothing_policy
+from drake_abs.policy.methods import make_smoothing, method
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.tasks.locomotion_training import LocomotionTraining, train_method
 
@@ -75,7 +75,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     if any(name not in TASKS for name in config.tasks):
         raise ValueError(f"tasks must be among {TASKS}; got {config.tasks!r}")
     methods = {m: method(m) for m in config.methods}  # unknown methods refused here
-    smoothing = {m: e.smoothing_policy(contact_aware=config.contact_aware)
+    smoothing = {m: e.make_smoothing(contact_aware=config.contact_aware)
                  for m, e in methods.items()}  # fmt: skip
     out = results_dir(NAME, out)
     (out / "policies").mkdir(exist_ok=True)
@@ -86,7 +86,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     csv_rows = []
     for name in config.tasks:
         results[name] = {}
-        true_task = locomotion_task(name, smoothing=smoothing_policy("exact"))  # the scoring
+        true_task = locomotion_task(name, smoothing=make_smoothing("exact"))  # the scoring
         x_eval = true_task.initial_states(np.random.default_rng(config.eval_seed),
                                           config.eval_episodes)  # fmt: skip
         for m, entry in methods.items():

@@ -152,7 +152,7 @@ def train_policy(name: str, config: Config, eval_task, folder: Path) -> Path:
     ``eval_task`` (our exact plant) from ``select_episodes`` reset states, and save it to
     ``folder/policies/<name>_fopg_<smoothing>``. Returns the saved JSON's path."""
     fopg = method("fopg_abs" if config.smoothing == "abs" else "fopg_exact")
-    smoothing = (fopg.smoothing_policy(contact_aware=config.contact_aware)
+    smoothing = (fopg.make_smoothing(contact_aware=config.contact_aware)
                  if config.smoothing == "abs" else None)  # fmt: skip
     task = locomotion_task(name, smoothing=smoothing)
     inner = LinearPolicy(task.n_obs, task.nu)

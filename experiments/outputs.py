@@ -1,5 +1,5 @@
 """What every experiment shares: its results folder, its list of written files (absolute paths),
-progress bars, readable names for smoothing policies in plots, and the writers of its figures,
+progress bars, readable names for smoothing designs in plots, and the writers of its figures,
 tables, CSV and JSON files.
 
 Every experiment's entry point is ``run(config: Config | None = None, out: str | Path | None =

@@ -48,7 +48,7 @@ from drake_abs.engine import open_loop
 from drake_abs.experiments import outputs
 from drake_abs.multibody import Scene, build_scene_model
 from drake_abs.multibody.energy import mechanical_energy
-from drake_abs.policy.methods import SMOOTHINGS, smoothing_policy
+from drake_abs.policy.methods import SMOOTHINGS, make_smoothing
 from drake_abs.reference.comparison_scenes import SCENES, ComparisonScenes
 from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.reference.drake_twin import APPROXIMATION_LABELS
@@ -204,7 +204,7 @@ def _stepper(scene: str, s: Setting, config: Config):
     if s.family == "gaussian":
         smoothing = GaussianMatched(s.value)
     else:
-        smoothing = TimeStepScaled.between(smoothing_policy(
+        smoothing = TimeStepScaled.between(make_smoothing(
             s.family, mu=s.value or 0.0, contact_aware=(cfg.abs_mu_max[i], cfg.abs_length[i])
         ), s.time_step, cfg.time_step)  # fmt: skip
     options = {"tol": s.value} if s.family == "exact" and s.value is not None else {}

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 
-from drake_abs.contact.unconverged import apply_unconverged_policy
+from drake_abs.contact.unconverged import apply_on_unconverged
 
 
 def is_autodiff(arr: np.ndarray) -> bool:
@@ -52,7 +52,7 @@ def guarded_jacobians(converged, on_unconverged: str, *jacobians: np.ndarray) ->
     :mod:`drake_abs.contact.unconverged`): unchanged when every solve ``converged``; NaN under
     ``"drop"`` (the derivatives a Drake system passes on are then visibly unusable), unchanged
     under ``"flag"`` (both warn), an exception under ``"raise"``."""
-    used = apply_unconverged_policy(np.atleast_1d(converged).reshape(1, -1), on_unconverged)
+    used = apply_on_unconverged(np.atleast_1d(converged).reshape(1, -1), on_unconverged)
     if used[0]:
         return list(jacobians)
     return [np.full_like(J, np.nan) for J in jacobians]

@@ -12,7 +12,7 @@ from pydrake.geometry import FramePoseVector_
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_abs.contact.unconverged import UnconvergedPolicy, check_unconverged_policy
+from drake_abs.contact.unconverged import OnUnconverged, check_on_unconverged
 from drake_abs.multibody.stepper import ComplementarityStepper
 from drake_abs.systems.plant_base import ComplementarityPlantBase
 
@@ -70,7 +70,7 @@ def ComplementarityPlant_(T):
         def _construct(
             self,
             stepper: ComplementarityStepper,
-            on_unconverged: UnconvergedPolicy = "drop",
+            on_unconverged: OnUnconverged = "drop",
             scene_graph=None,
             scene=None,
             initial_state=None,
@@ -83,7 +83,7 @@ def ComplementarityPlant_(T):
                     "ComplementarityPlant: stepper must be a ComplementarityStepper (e.g. "
                     f"build_scene_model(scene).stepper()); got {type(stepper).__name__}"
                 )
-            check_unconverged_policy(on_unconverged)
+            check_on_unconverged(on_unconverged)
             self.on_unconverged = on_unconverged
             self.stepper = stepper
             self.time_step = stepper.model.h

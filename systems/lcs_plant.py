@@ -14,8 +14,8 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_abs.contact.lcs import LCS, GradientMode, LcsStepper, check_gradient_mode
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy
-from drake_abs.contact.unconverged import UnconvergedPolicy, check_unconverged_policy
+from drake_abs.contact.smoothing import Exact, Smoothing
+from drake_abs.contact.unconverged import OnUnconverged, check_on_unconverged
 from drake_abs.systems.plant_base import ComplementarityPlantBase
 
 
@@ -27,9 +27,9 @@ def _check_arguments(lcs, smoothing) -> None:
             "LcsPlant: lcs.time_step is None; build the LCS with time_step=h, the step (s) its "
             "matrices were discretised with (the plant's update period is read from there)"
         )
-    if smoothing is not None and not isinstance(smoothing, SmoothingPolicy):
+    if smoothing is not None and not isinstance(smoothing, Smoothing):
         raise ValueError(
-            "LcsPlant(lcs, smoothing=None, ...): smoothing must be a SmoothingPolicy or None; got "
+            "LcsPlant(lcs, smoothing=None, ...): smoothing must be a Smoothing or None; got "
             f"{smoothing!r} (the time step is not an argument: it is lcs.time_step = "
             f"{lcs.time_step} s)"
         )
@@ -56,7 +56,7 @@ def LcsPlant_(T):
         before the first step).
 
         Numeric parameters (in the Context; AutoDiffXd may seed derivatives on them):
-        ``smoothing`` (the policy's :attr:`~SmoothingPolicy.parameter_names`, index
+        ``smoothing`` (the policy's :attr:`~Smoothing.parameter_names`, index
         ``smoothing_parameter_index``; absent for a policy without any, e.g. Exact) and
         ``model`` (every entry of A, B, C, c, D, E, F, d, :attr:`LCS.parameter_names`, index
         ``model_parameter_index``). Changed values are used by the next step.
@@ -79,14 +79,14 @@ def LcsPlant_(T):
         def _construct(
             self,
             lcs: LCS,
-            smoothing: SmoothingPolicy | None = None,
+            smoothing: Smoothing | None = None,
             gradient: GradientMode = "total",
-            on_unconverged: UnconvergedPolicy = "drop",
+            on_unconverged: OnUnconverged = "drop",
             converter=None,
         ):
             LeafSystem_[T].__init__(self, converter)
             _check_arguments(lcs, smoothing)
-            check_unconverged_policy(on_unconverged)
+            check_on_unconverged(on_unconverged)
             check_gradient_mode(gradient)
             self.on_unconverged = on_unconverged
             self.lcs = lcs

@@ -4,7 +4,7 @@
 Drake's own discrete MultibodyPlant declares them:
 
 - one discrete state vector ``x`` (so ``context.SetDiscreteState(x0)`` works);
-- numeric parameters in the Context: ``smoothing`` (the smoothing policy's numeric parameters,
+- numeric parameters in the Context: ``smoothing`` (the smoothing's numeric parameters,
   e.g. ``(mu_max, length, mu_min)`` for ContactAware; absent for exact contact) and ``model``
   (the step's model parameters), so that AutoDiffXd can differentiate with respect to them;
 - input ``actuation``; outputs ``state`` (x), and ``impulse``, ``mu`` and ``converged`` of the

@@ -1,4 +1,4 @@
-"""Contact as a softened complementarity system: smoothing policies (how much mu per contact),
+"""Contact as a softened complementarity system: smoothing designs (how much mu per contact),
 the linear complementarity system (LCS) and its stepper, the rigid-body time-stepping LCP
 assembled from a model's mass matrix and contact Jacobians, and the one step record (``Step``).
 
@@ -11,7 +11,7 @@ from drake_abs.contact.smoothing import (
     Exact,
     Fixed,
     GaussianMatched,
-    SmoothingPolicy,
+    Smoothing,
     TimeStepScaled,
 )
 from drake_abs.contact.step import Step
@@ -23,7 +23,7 @@ __all__ = [
     "Fixed",
     "GaussianMatched",
     "LcsStepper",
-    "SmoothingPolicy",
+    "Smoothing",
     "Step",
     "TimeStepScaled",
 ]

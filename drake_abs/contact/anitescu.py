@@ -12,7 +12,7 @@ import numpy as np
 
 from drake_abs.contact.cone import FrictionCone, GeneratorSmoothing
 from drake_abs.contact.lcs import GradientMode
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.contact.step_data import ContactStepResult, ParameterDerivatives, StepQuantities
 from drake_abs.contact.step_jacobians import check_parameter_shapes
 from drake_abs.contact.stewart_trinkle import stewart_trinkle_step
@@ -22,7 +22,7 @@ def anitescu_step(
     quant: StepQuantities,
     cone: FrictionCone,
     h: float,
-    smoothing: SmoothingPolicy,
+    smoothing: Smoothing,
     gradient: GradientMode,
     strict: bool,
     par: ParameterDerivatives | None,

@@ -7,7 +7,7 @@
   cone row per frictional contact (nf in all, N s).
 - :class:`GeneratorMap`: the rows of the Anitescu formulation of a cone, one per generator
   ``n + alpha t_j``, and the maps between them and the Stewart-Trinkle layout.
-- :class:`GeneratorSmoothing`: a contact-level smoothing policy seen from those generator rows.
+- :class:`GeneratorSmoothing`: a contact-level smoothing seen from those generator rows.
 - :func:`expand_mu`: per-contact values (mu, m N s) as per-row values (mu / h on the friction
   and cone rows: one central-path value kappa = mu / h for every velocity-level pair of a
   contact; see :mod:`drake_abs.contact.contact_lcp`).
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 
 #: the friction formulations a :class:`FrictionCone` offers
 FORMULATIONS = ("stewart_trinkle", "anitescu")
@@ -198,12 +198,12 @@ class GeneratorMap:
         return self.contact.size
 
 
-class GeneratorSmoothing(SmoothingPolicy):
-    """A contact-level smoothing policy seen from the generator rows: each contact's mu comes
+class GeneratorSmoothing(Smoothing):
+    """A contact-level smoothing seen from the generator rows: each contact's mu comes
     from its mean generator distance and compliance (``average``), and is shared evenly by its
     generators (``share``)."""
 
-    def __init__(self, inner: SmoothingPolicy, generators: GeneratorMap) -> None:
+    def __init__(self, inner: Smoothing, generators: GeneratorMap) -> None:
         self.inner = inner
         self.g = generators
 

@@ -22,7 +22,7 @@ but not P (zero diagonal in the omega block, non-symmetric cone rows): the inter
 without the P-matrix check (``on_bad_matrix="attempt"``) and reports per problem whether it
 converged; it never returns an unconverged solve as valid.
 
-Smoothing: the policy sees the normal rows (distances z_n, compliance block F_nn) and gives one
+Smoothing: the smoothing sees the normal rows (distances z_n, compliance block F_nn) and gives one
 mu per contact (**larger is smoother**); that contact's friction and cone rows get mu / h. Divided
 by h, the normal row is a velocity-level complementarity like the friction rows, so this is one
 central-path value kappa = mu / h for every velocity-level pair of the contact (the uniform
@@ -51,7 +51,7 @@ import numpy as np
 from drake_abs.contact.anitescu import anitescu_step
 from drake_abs.contact.cone import FORMULATIONS, FrictionCone
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.smoothing import Exact, Smoothing
 from drake_abs.contact.step_data import ContactStepResult, ParameterDerivatives, StepQuantities
 from drake_abs.contact.stewart_trinkle import stewart_trinkle_step
 from drake_abs.lcp.ipm import check_solver_options
@@ -75,7 +75,7 @@ def contact_step(
     quant: StepQuantities,
     cone: FrictionCone,
     h: float,
-    smoothing: SmoothingPolicy | None = None,
+    smoothing: Smoothing | None = None,
     *,
     gradient: GradientMode = "total",
     strict: bool = False,

@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_finite_array, check_shape
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.smoothing import Exact, Smoothing
 from drake_abs.contact.step import Step
 from drake_abs.contact.unconverged import exact_fallback
 from drake_abs.lcp.ipm import (
@@ -176,7 +176,7 @@ class LCS:
         self,
         x,
         u,
-        smoothing: SmoothingPolicy | None = None,
+        smoothing: Smoothing | None = None,
         *,
         gradient: GradientMode = "total",
         jacobians: bool = True,
@@ -199,7 +199,7 @@ class LCS:
                 respect to every matrix entry (:attr:`parameter_names`; F enters as
                 ``s = z + F lam``, so ``dlam/dF_ij = dlam/dq_i lam_j``).
             smoothing_parameters: also (after the matrices' columns, if any) the columns of
-                the smoothing policy's numeric parameters (``"smoothing.<name>"``), at fixed z:
+                the smoothing's numeric parameters (``"smoothing.<name>"``), at fixed z:
                 in both gradient modes, since they set mu's value rather than its dependence
                 on the state.
 
@@ -317,7 +317,7 @@ class LCS:
 
 @dataclass(frozen=True)
 class LcsStepper:
-    """An LCS with its smoothing policy and gradient mode: a batched stepper
+    """An LCS with its smoothing and gradient mode: a batched stepper
     (:class:`drake_abs.engine.Stepper`) for the closed-loop engine.
 
     Args:
@@ -327,7 +327,7 @@ class LcsStepper:
     """
 
     lcs: LCS
-    smoothing: SmoothingPolicy | None = None
+    smoothing: Smoothing | None = None
     gradient: GradientMode = "total"
 
     def __post_init__(self):

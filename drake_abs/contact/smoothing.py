@@ -1,7 +1,7 @@
-"""Smoothing policies: how much to soften each contact (docs/math.md section 5; Zhang et al. 2023,
+"""Smoothing designs: how much to soften each contact (docs/math.md section 5; Zhang et al. 2023,
 section 5).
 
-A policy maps a batch of contact distances ``z`` (B, d) (the distances before any impulse acts,
+A smoothing maps a batch of contact distances ``z`` (B, d) (the distances before any impulse acts,
 ``z = D x + E u + d``) and the LCP matrix F to a per-contact central-path value ``mu`` (B, d).
 
 **Direction: a larger mu means more smoothing** (contact forces act at a larger distance and the
@@ -16,7 +16,7 @@ dynamics are less stiff); ``mu = 0`` is hard contact.
   corrected as in docs/math.md
   section 5b).
 
-Each policy also gives ``dmu_dz`` (B, d, d) for the ``total`` gradient mode; the ``frozen`` mode
+Each smoothing also gives ``dmu_dz`` (B, d, d) for the ``total`` gradient mode; the ``frozen`` mode
 (Zhang et al. 2023, Algorithm 1) treats mu as a constant.
 
 **Units and the time step.** In a contact problem a normal row reads ``gamma * s = mu`` with
@@ -28,7 +28,7 @@ so it floats at the gap ``s* = mu / (m g h)``, and the barrier's force at a gap 
 1-D point mass (``drake_abs.tasks.point_mass``, 1 kg) dropped from 5 cm under
 ``ContactAware(1e-2, 0.05)`` tuned at h = 10 ms: it settles about 4 cm up at h = 10 ms, but at
 h = 0.1 ms the same mu throws it to 2.3 m (``Fixed(1e-3)``: to 4.5 m). :class:`TimeStepScaled`
-restates a policy given at a reference step ``h_ref`` for the step h actually used, multiplying
+restates a smoothing given at a reference step ``h_ref`` for the step h actually used, multiplying
 mu by ``h / h_ref``: the rest gap and the force law ``mu / (h s)`` are then the reference's at
 every h (a scene does this when its smoothing names ``reference_time_step``).
 :class:`GaussianMatched` is built from F (which carries h) and cannot be rescaled this way (see
@@ -60,7 +60,7 @@ def _check_positive(value: float, name: str, *, allow_zero: bool = False) -> flo
     return value
 
 
-class SmoothingPolicy(ABC):
+class Smoothing(ABC):
     """Maps contact distances z (B, d) and F ((d, d) or (B, d, d)) to mu (B, d)."""
 
     @abstractmethod
@@ -68,7 +68,7 @@ class SmoothingPolicy(ABC):
         """Per-contact central-path value (B, d), >= 0; larger is smoother."""
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        """Derivative of :meth:`mu` with respect to z, (B, d, d). Zero for constant policies."""
+        """Derivative of :meth:`mu` with respect to z, (B, d, d). Zero for constant smoothings."""
         return np.zeros(z.shape + z.shape[-1:])
 
     @property
@@ -82,8 +82,8 @@ class SmoothingPolicy(ABC):
         """True when mu = 0 for every state (hard contact)."""
         return False
 
-    # The policy's numeric parameters (S of them), so that a Drake Context can hold them and
-    # AutoDiffXd can differentiate with respect to them. A policy with none (``Exact``, or one
+    # The smoothing's numeric parameters (S of them), so that a Drake Context can hold them and
+    # AutoDiffXd can differentiate with respect to them. A smoothing with none (``Exact``, or one
     # with a custom function) names none.
 
     #: The names of the numeric parameters, in the order of :meth:`parameter_values`.
@@ -93,8 +93,8 @@ class SmoothingPolicy(ABC):
         """The numeric parameters (S,), in the order of :attr:`parameter_names`."""
         return np.array([float(getattr(self, n)) for n in self.parameter_names])
 
-    def with_parameters(self, values) -> SmoothingPolicy:
-        """The same policy with the numeric parameters ``values`` (S,) (checked as at
+    def with_parameters(self, values) -> Smoothing:
+        """The same smoothing with the numeric parameters ``values`` (S,) (checked as at
         construction)."""
         values = np.asarray(values, dtype=float).reshape(-1)
         if values.shape != (len(self.parameter_names),):
@@ -113,19 +113,19 @@ class SmoothingPolicy(ABC):
 
     def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         """Derivative of mu with respect to the diagonal of F at fixed z, (B, d, d): entry
-        ``[b, i, j]`` is ``d mu_i / d F_jj``. Zero for policies that do not read F (of this
+        ``[b, i, j]`` is ``d mu_i / d F_jj``. Zero for smoothings that do not read F (of this
         module's, only :class:`~drake_abs.contact.smoothing.GaussianMatched` does)."""
         return np.zeros(z.shape + z.shape[-1:])
 
 
-class WrappedPolicy(SmoothingPolicy):
-    """A policy built on another one, held in the dataclass field named ``inner_field``:
-    whether it is constant or exact, and its numeric parameters, are the inner policy's."""
+class WrappedSmoothing(Smoothing):
+    """A smoothing built on another one, held in the dataclass field named ``inner_field``:
+    whether it is constant or exact, and its numeric parameters, are the inner smoothing's."""
 
-    inner_field = "policy"
+    inner_field = "smoothing"
 
     @property
-    def inner(self) -> SmoothingPolicy:
+    def inner(self) -> Smoothing:
         return getattr(self, self.inner_field)
 
     @property
@@ -143,12 +143,12 @@ class WrappedPolicy(SmoothingPolicy):
     def parameter_values(self) -> np.ndarray:
         return self.inner.parameter_values()
 
-    def with_parameters(self, values) -> SmoothingPolicy:
+    def with_parameters(self, values) -> Smoothing:
         return replace(self, **{self.inner_field: self.inner.with_parameters(values)})
 
 
 @dataclass(frozen=True)
-class Exact(SmoothingPolicy):
+class Exact(Smoothing):
     """Hard contact: ``mu = 0`` (the solver stops at its exact floor, see ``solve_lcp``)."""
 
     is_constant = True
@@ -159,7 +159,7 @@ class Exact(SmoothingPolicy):
 
 
 @dataclass(frozen=True)
-class Fixed(SmoothingPolicy):
+class Fixed(Smoothing):
     """Barrier smoothing (BS): the same ``mu`` for every contact and state. Larger is smoother.
 
     Units: those of ``lam * z``: impulse times distance for contact problems, m N s. The value
@@ -199,7 +199,7 @@ def exponential_decay(mu_min: float, mu_max: float, length: float) -> Callable:
 
 
 @dataclass(frozen=True)
-class ContactAware(SmoothingPolicy):
+class ContactAware(Smoothing):
     """Adaptive barrier smoothing (ABS), contact-aware (Zhang et al. 2023, section 5.1, Algorithm
     1).
 
@@ -284,7 +284,7 @@ class ContactAware(SmoothingPolicy):
 
 
 @dataclass(frozen=True)
-class GaussianMatched(SmoothingPolicy):
+class GaussianMatched(Smoothing):
     """Per-contact ABS matched to Gaussian randomised smoothing (docs/math.md section 5b).
 
     With ``kappa(z) = (sigma phi(z/sigma) - z Phi(-z/sigma)) / F_ii + c1 z + c2`` and
@@ -300,7 +300,7 @@ class GaussianMatched(SmoothingPolicy):
     the launch speed grows like sigma / h. On the 1 kg point mass, ``sigma = 2 mm`` resting on
     the ground throws it 0.8 mm up at h = 10 ms but 6.4 m at h = 0.1 ms. Multiplying mu by
     ``h / h_ref`` does not repair this (the impulse scales like the square root), so
-    :class:`TimeStepScaled` refuses this policy; choose sigma for the step it runs at.
+    :class:`TimeStepScaled` refuses this smoothing; choose sigma for the step it runs at.
 
     Args:
         sigma: width of the matched Gaussian, in the units of z (> 0).
@@ -374,60 +374,60 @@ class GaussianMatched(SmoothingPolicy):
 
 
 @dataclass(frozen=True)
-class TimeStepScaled(WrappedPolicy):
-    """``policy`` stated at a reference time step, run at another: mu (and dmu_dz) are the inner
-    policy's times ``scale = h / h_ref``.
+class TimeStepScaled(WrappedSmoothing):
+    """``smoothing`` stated at a reference time step, run at another: mu (and dmu_dz) are the inner
+    smoothing's times ``scale = h / h_ref``.
 
     A barrier contact's rest gap is ``mu / (m g h)`` and its force at a gap s is ``mu / (h s)``
     (module docstring); with mu proportional to h both are those of the reference step at every
-    h, so a policy tuned at h_ref keeps its meaning when the step is refined. Distances inside
-    the policy (``ContactAware.length``) are not scaled.
+    h, so a smoothing tuned at h_ref keeps its meaning when the step is refined. Distances inside
+    the smoothing (``ContactAware.length``) are not scaled.
 
     Args:
-        policy: the policy as stated at h_ref (:class:`Exact`, :class:`Fixed`,
+        smoothing: the smoothing as stated at h_ref (:class:`Exact`, :class:`Fixed`,
             :class:`ContactAware` or a custom one; not :class:`GaussianMatched`, whose mu is
             not proportional to a parameter, see its docstring).
         scale: ``h / h_ref``, a finite number > 0.
     """
 
-    policy: SmoothingPolicy
+    smoothing: Smoothing
     scale: float
 
     def __post_init__(self):
-        if not isinstance(self.policy, SmoothingPolicy):
+        if not isinstance(self.smoothing, Smoothing):
             raise ValueError(
-                f"TimeStepScaled.policy must be a SmoothingPolicy; got {type(self.policy).__name__}"
+                f"TimeStepScaled.smoothing must be a Smoothing; got {type(self.smoothing).__name__}"
             )
-        if isinstance(self.policy, GaussianMatched):
+        if isinstance(self.smoothing, GaussianMatched):
             raise ValueError(
-                "TimeStepScaled.policy cannot be GaussianMatched: its impulse does not scale "
+                "TimeStepScaled.smoothing cannot be GaussianMatched: its impulse does not scale "
                 "with mu (choose sigma for the time step it runs at)"
             )
         object.__setattr__(self, "scale", _check_positive(self.scale, "TimeStepScaled.scale"))
 
     @classmethod
     def between(
-        cls, policy: SmoothingPolicy, time_step: float, reference_time_step: float
-    ) -> SmoothingPolicy:
-        """``policy`` (stated at ``reference_time_step``, s) for a step of ``time_step`` (s);
-        the policy itself when the two are equal or it is exact."""
+        cls, smoothing: Smoothing, time_step: float, reference_time_step: float
+    ) -> Smoothing:
+        """``smoothing`` (stated at ``reference_time_step``, s) for a step of ``time_step`` (s);
+        the smoothing itself when the two are equal or it is exact."""
         h = _check_positive(time_step, "time_step")
         h_ref = _check_positive(reference_time_step, "reference_time_step")
-        if h == h_ref or policy.is_exact:
-            return policy
-        return cls(policy, h / h_ref)
+        if h == h_ref or smoothing.is_exact:
+            return smoothing
+        return cls(smoothing, h / h_ref)
 
     def mu(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        return self.scale * self.policy.mu(z, F)
+        return self.scale * self.smoothing.mu(z, F)
 
     def dmu_dz(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        return self.scale * self.policy.dmu_dz(z, F)
+        return self.scale * self.smoothing.dmu_dz(z, F)
 
-    # the numeric parameters are the inner policy's, as stated at the reference step (the
+    # the numeric parameters are the inner smoothing's, as stated at the reference step (the
     # scale is not one)
 
     def dmu_dparameters(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        return self.scale * self.policy.dmu_dparameters(z, F)
+        return self.scale * self.smoothing.dmu_dparameters(z, F)
 
     def dmu_dF_diagonal(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
-        return self.scale * self.policy.dmu_dF_diagonal(z, F)
+        return self.scale * self.smoothing.dmu_dF_diagonal(z, F)

@@ -108,9 +108,9 @@ class ParameterDerivatives:
             radius moves its witness point, and with it the rolling part of the tangential
             velocity), or None likewise. Under Anitescu both move the generator rows
             ``n + alpha t`` (as do the friction coefficients themselves).
-        smoothing_from: the first of the trailing columns that are the smoothing policy's
+        smoothing_from: the first of the trailing columns that are the smoothing's
             numeric parameters
-            (:meth:`~drake_abs.contact.smoothing.SmoothingPolicy.dmu_dparameters`: they move mu
+            (:meth:`~drake_abs.contact.smoothing.Smoothing.dmu_dparameters`: they move mu
             at fixed distances, and nothing else), or None when there are none. Their entries in
             the arrays above are zero.
     """

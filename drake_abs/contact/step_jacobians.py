@@ -25,7 +25,7 @@ import numpy as np
 
 from drake_abs.contact.cone import FrictionCone, expand_mu
 from drake_abs.contact.lcs import GradientMode
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 from drake_abs.lcp.ipm import LCPResult
 
@@ -42,7 +42,7 @@ def step_jacobians(
     f: np.ndarray,
     v_next: np.ndarray,
     lcp: LCPResult,
-    smoothing: SmoothingPolicy,
+    smoothing: Smoothing,
     gradient: GradientMode,
     par: ParameterDerivatives | None,
 ) -> dict[str, np.ndarray]:

@@ -18,7 +18,7 @@ import numpy as np
 
 from drake_abs.contact.cone import FrictionCone, expand_mu
 from drake_abs.contact.lcs import GradientMode
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.contact.step_data import ContactStepResult, ParameterDerivatives, StepQuantities
 from drake_abs.contact.step_jacobians import step_jacobians
 from drake_abs.contact.unconverged import exact_fallback
@@ -109,7 +109,7 @@ def stewart_trinkle_step(
     quant: StepQuantities,
     cone: FrictionCone,
     h: float,
-    smoothing: SmoothingPolicy,
+    smoothing: Smoothing,
     gradient: GradientMode,
     strict: bool,
     parameters: ParameterDerivatives | None,

@@ -33,7 +33,7 @@ from drake_abs.lcp.ipm import LCPConvergenceWarning, LCPResult, solve_lcp_truste
 #: What rollouts and estimators do with a rollout that took an unconverged solver step:
 #: ``"drop"`` (default) leaves it out of every average and marks its gradient NaN, ``"flag"``
 #: keeps it (counted and warned), ``"raise"`` raises :class:`UnconvergedStepError`.
-UnconvergedPolicy = Literal["drop", "flag", "raise"]
+OnUnconverged = Literal["drop", "flag", "raise"]
 UNCONVERGED_POLICIES = ("drop", "flag", "raise")
 
 
@@ -45,16 +45,16 @@ class UnconvergedStepWarning(UserWarning):
     """Rollouts took unconverged solver steps; says how many and what was done with them."""
 
 
-def check_unconverged_policy(on_unconverged: str) -> None:
+def check_on_unconverged(on_unconverged: str) -> None:
     if on_unconverged not in UNCONVERGED_POLICIES:
         raise ValueError(
             f"on_unconverged must be one of {UNCONVERGED_POLICIES}; got {on_unconverged!r}"
         )
 
 
-def apply_unconverged_policy(converged: np.ndarray, on_unconverged: str) -> np.ndarray:
+def apply_on_unconverged(converged: np.ndarray, on_unconverged: str) -> np.ndarray:
     """The ``used`` mask (B,) of rollouts with step flags ``converged`` (B, T), after warning or
-    raising as ``on_unconverged`` says (see :data:`UnconvergedPolicy`)."""
+    raising as ``on_unconverged`` says (see :data:`OnUnconverged`)."""
     clean = converged.all(axis=1)
     if clean.all():
         return clean

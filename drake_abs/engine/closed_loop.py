@@ -37,9 +37,9 @@ import numpy as np
 
 from drake_abs._validation import as_finite_array
 from drake_abs.contact.unconverged import (
-    UnconvergedPolicy,
-    apply_unconverged_policy,
-    check_unconverged_policy,
+    OnUnconverged,
+    apply_on_unconverged,
+    check_on_unconverged,
 )
 from drake_abs.engine.adjoint import reverse_pass
 from drake_abs.engine.protocols import (
@@ -139,7 +139,7 @@ def rollout(
     sigma: float = 1.0,
     gradient: bool = True,
     parameters: bool = False,
-    on_unconverged: UnconvergedPolicy = "drop",
+    on_unconverged: OnUnconverged = "drop",
 ) -> Trajectory:
     """Roll out M noisy closed loops and (optionally) differentiate each return.
 
@@ -176,7 +176,7 @@ def rollout(
     tape = _forward(stepper, policy, theta, x0, noise, reward, sigma, gradient, parameters,
                     on_unconverged)  # fmt: skip
     # a step after the episode ended does not count, converged or not
-    used = apply_unconverged_policy(tape.converged | ~tape.alive[:, :-1], on_unconverged)
+    used = apply_on_unconverged(tape.converged | ~tape.alive[:, :-1], on_unconverged)
     common = dict(
         x=tape.x, u=tape.u, impulse=tape.impulse, mu=tape.mu, converged=tape.converged,
         used=used, model_parameter_names=tape.theta_names, alive=tape.alive[:, :-1],
@@ -214,7 +214,7 @@ def open_loop(
     u,
     *,
     jacobians: bool = True,
-    on_unconverged: UnconvergedPolicy = "drop",
+    on_unconverged: OnUnconverged = "drop",
 ) -> Trajectory:
     """Apply given inputs: ``x_{t+1} = f(x_t, u_t)`` for a batch, and (optionally) the Jacobians
     of the final state with respect to the initial state and every input, by the same reverse
@@ -237,7 +237,7 @@ def open_loop(
             f"u must have shape (N, nu) or (B, N, nu) with B = {X0.shape[0]}; got {u.shape}"
         )
     tape = _forward(stepper, None, None, X0, U, None, 1.0, jacobians, False, on_unconverged)
-    used = apply_unconverged_policy(tape.converged, on_unconverged)
+    used = apply_on_unconverged(tape.converged, on_unconverged)
     dx0 = du = None
     if jacobians:
         nb, nx = X0.shape
@@ -272,7 +272,7 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
              on_unconverged) -> Tape:  # fmt: skip
     """The forward pass: check the inputs, step the batch H times, store what the reverse pass
     needs (step Jacobians when ``jacobians``; policy products for a pullback policy)."""
-    check_unconverged_policy(on_unconverged)
+    check_on_unconverged(on_unconverged)
     noise = as_finite_array(noise, "noise", ndim=(3,))
     M, H, nu = noise.shape
     x0 = as_finite_array(x0, "x0", ndim=(1, 2))

@@ -48,7 +48,7 @@ from typing import Literal
 import numpy as np
 
 from drake_abs._validation import as_count, as_finite_array, check_shape
-from drake_abs.contact.unconverged import UnconvergedPolicy
+from drake_abs.contact.unconverged import OnUnconverged
 from drake_abs.engine import ModelJacobians, Stepper, rollout
 from drake_abs.mpc.policy import MpcPolicy
 from drake_abs.mpc.qp_mpc import QpMpc, check_bounds
@@ -186,7 +186,7 @@ def closed_loop(
     *,
     gradient: GradientSource | None = None,
     model: tuple[np.ndarray, np.ndarray] | None = None,
-    on_unconverged: UnconvergedPolicy = "raise",
+    on_unconverged: OnUnconverged = "raise",
 ) -> ClosedLoopResult:
     """Roll the MPC policy out on ``plant`` for ``steps`` steps from ``x0`` and evaluate the cost,
     in the closed-loop engine.

@@ -2,7 +2,7 @@
 :class:`drake_abs.multibody.scene.Scene`.
 
 ``make_stepper(scene)`` (or ``build_scene_model(scene).stepper()``) is the one way to get a
-scene's batched step with every setting the scene names applied (smoothing policy, activation
+scene's batched step with every setting the scene names applied (smoothing, activation
 distance); arguments override a setting explicitly, nothing is copied by hand. A stepper built
 here is picklable: it is sent as its scene and settings and rebuilt where it is unpickled
 (:func:`rebuild_stepper`).
@@ -27,7 +27,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_abs.contact.lcs import GradientMode
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.multibody.contacts import contact_candidates
 from drake_abs.multibody.drake_dynamics import (
     ContactModelBase,
@@ -68,16 +68,16 @@ class SceneModel:
     def stepper(
         self,
         *,
-        smoothing: SmoothingPolicy | None = None,
+        smoothing: Smoothing | None = None,
         activation_distance: float | None = None,
         gradient: GradientMode = "total",
         friction: str | None = None,
         **solver_options,
     ) -> ComplementarityStepper:
-        """The scene's batched step, with the scene's smoothing policy and activation distance.
+        """The scene's batched step, with the scene's smoothing and activation distance.
 
         Args:
-            smoothing: replaces the scene's smoothing policy (larger mu: more smoothing). It
+            smoothing: replaces the scene's smoothing (larger mu: more smoothing). It
                 is used as given at the scene's ``time_step``: the smoothing's
                 ``reference_time_step`` does not rescale it (wrap it in
                 :class:`~drake_abs.contact.smoothing.TimeStepScaled` for that).
@@ -89,7 +89,7 @@ class SceneModel:
         """
         stepper = ComplementarityStepper(
             self.contact_model,
-            self.scene.smoothing_policy() if smoothing is None else smoothing,
+            self.scene.make_smoothing() if smoothing is None else smoothing,
             gradient,
             self.scene.activation_distance if activation_distance is None else activation_distance,
             self.scene.friction_model if friction is None else friction,

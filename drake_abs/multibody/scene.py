@@ -79,7 +79,7 @@ from drake_abs.contact.smoothing import (
     Exact,
     Fixed,
     GaussianMatched,
-    SmoothingPolicy,
+    Smoothing,
     TimeStepScaled,
 )
 from drake_abs.multibody.contacts import contact_candidates
@@ -116,7 +116,7 @@ class _Smoothing:
     makes, and the time step mu is stated at."""
 
     kind: ClassVar[str]
-    policy_type: ClassVar[type[SmoothingPolicy]]
+    policy_type: ClassVar[type[Smoothing]]
 
     reference_time_step: float | None = key(
         "a number > 0: the time step mu is stated at (s), or null",
@@ -130,8 +130,8 @@ class _Smoothing:
         kw_only=True,
     )
 
-    def policy(self) -> SmoothingPolicy:
-        """The smoothing policy, at the reference time step (``ValueError`` for parameters it
+    def policy(self) -> Smoothing:
+        """The smoothing, at the reference time step (``ValueError`` for parameters it
         refuses)."""
         own = {f.name: getattr(self, f.name) for f in fields(self)}
         del own["reference_time_step"]
@@ -260,7 +260,7 @@ class Scene:
     )
     smoothing: SmoothingSpec = key(
         f"a mapping {{kind: one of {sorted(SMOOTHING_KINDS)}, <the kind's parameters>}}",
-        "The smoothing policy (:meth:`smoothing_policy`), a member of the union named by "
+        "The smoothing (:meth:`make_smoothing`), a member of the union named by "
         "``kind``: :class:`ExactSmoothing` (the default, and when ``kind`` is left out), "
         ":class:`FixedSmoothing`, :class:`ContactAwareSmoothing` or "
         ":class:`GaussianMatchedSmoothing`, each with its parameters; larger mu is smoother",
@@ -392,8 +392,8 @@ class Scene:
                 raise _Problem(at, f"{at} must be a list of finite numbers")
         self._smoothing_policy()  # its parameters checked now, not at the first step
 
-    def smoothing_policy(self) -> SmoothingPolicy:
-        """The smoothing policy object this scene names, at this scene's time step: when the
+    def make_smoothing(self) -> Smoothing:
+        """The smoothing object this scene names, at this scene's time step: when the
         smoothing states a ``reference_time_step`` other than ``time_step``, the named policy
         wrapped in :class:`~drake_abs.contact.smoothing.TimeStepScaled` (mu times
         ``time_step / reference_time_step``)."""
@@ -402,7 +402,7 @@ class Scene:
         except _Problem as problem:
             raise ValueError(f"scene {self.name!r}: {problem.message}") from problem
 
-    def _smoothing_policy(self) -> SmoothingPolicy:
+    def _smoothing_policy(self) -> Smoothing:
         spec = self.smoothing
         try:
             policy = spec.policy()

@@ -22,7 +22,7 @@ from drake_abs.contact.cone import FORMULATIONS, FrictionCone
 from drake_abs.contact.contact_lcp import contact_step
 from drake_abs.contact.damping import damped_parameters
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.smoothing import Exact, Smoothing
 from drake_abs.contact.step import Step
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 from drake_abs.multibody.drake_dynamics import ContactModelBase
@@ -100,7 +100,7 @@ class ComplementarityStepper:
     def __init__(
         self,
         model: ContactModelBase,
-        smoothing: SmoothingPolicy | None = None,
+        smoothing: Smoothing | None = None,
         gradient: GradientMode = "total",
         activation_distance: float = float("inf"),
         friction: str = "stewart_trinkle",
@@ -204,10 +204,10 @@ class ComplementarityStepper:
         instances is qualified as ``"instance::joint"``."""
         return damping_joints(self.model.plant) if self._flags["damping"] else ()
 
-    def with_smoothing(self, smoothing: SmoothingPolicy) -> ComplementarityStepper:
-        """The same stepper with another smoothing policy (larger mu: more smoothing)."""
-        if not isinstance(smoothing, SmoothingPolicy):
-            raise ValueError(f"smoothing must be a SmoothingPolicy; got {type(smoothing).__name__}")
+    def with_smoothing(self, smoothing: Smoothing) -> ComplementarityStepper:
+        """The same stepper with another smoothing (larger mu: more smoothing)."""
+        if not isinstance(smoothing, Smoothing):
+            raise ValueError(f"smoothing must be a Smoothing; got {type(smoothing).__name__}")
         other = copy.copy(self)
         other.smoothing = smoothing
         return other
@@ -258,7 +258,7 @@ class ComplementarityStepper:
 
     @property
     def smoothing_parameter_names(self) -> tuple[str, ...]:
-        """The smoothing policy's numeric parameters as ``step(..., smoothing_parameters=True)``
+        """The smoothing's numeric parameters as ``step(..., smoothing_parameters=True)``
         names its columns: ``"smoothing.<name>"`` (e.g. ``smoothing.mu_max``)."""
         return tuple(f"smoothing.{n}" for n in self.smoothing.parameter_names)
 
@@ -283,7 +283,7 @@ class ComplementarityStepper:
         """
         if (parameters or smoothing_parameters) and not jacobians:
             raise ValueError("parameters=True and smoothing_parameters=True need jacobians=True")
-        # the theta columns: the model's parameters, then the smoothing policy's
+        # the theta columns: the model's parameters, then the smoothing's
         names = parameter_columns(parameters, lambda: self.parameter_names) + (
             self.smoothing_parameter_names if smoothing_parameters else ()
         )

@@ -34,9 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_abs.contact.unconverged import (
-    UnconvergedPolicy,
+    OnUnconverged,
     UnconvergedStepError,
-    check_unconverged_policy,
+    check_on_unconverged,
 )
 from drake_abs.engine import Policy, Reward, Stepper, Trajectory, rollout
 from drake_abs.engine.closed_loop import STEPPER_FORM
@@ -73,10 +73,10 @@ class PolicyObjective:
     x0: np.ndarray
     horizon: int
     sigma: float = 0.1
-    on_unconverged: UnconvergedPolicy = "drop"
+    on_unconverged: OnUnconverged = "drop"
 
     def __post_init__(self):
-        check_unconverged_policy(self.on_unconverged)
+        check_on_unconverged(self.on_unconverged)
         check_protocol(self.stepper, Stepper, "stepper", STEPPER_FORM)
         check_protocol(self.policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
         check_reward(self.reward)

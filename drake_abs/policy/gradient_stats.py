@@ -9,7 +9,7 @@ rollouts) this module measures
   grad^2), from K repeated independent batches (:func:`measure_variance`);
 - the **bias** ``b = || E g_hat - grad J_exact ||`` against a high-sample reference gradient of
   the *exact* objective, i.e. hard contact (:func:`reference_gradient`, :func:`measure_bias`);
-- both over smoothing policies, gradient modes and horizons (:func:`variance_bias_sweep`).
+- both over smoothing designs, gradient modes and horizons (:func:`variance_bias_sweep`).
 
 Compute cost. Every estimate is timed (wall clock, ``time.perf_counter``). The **variance per
 second of compute** is ``variance_seconds = v * t`` with t the mean seconds per estimate: the
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy
+from drake_abs.contact.smoothing import Exact, Smoothing
 from drake_abs.policy.estimators import GradientEstimate, PolicyObjective, first_order, zeroth_order
 
 #: ``estimator(theta, rng) -> GradientEstimate``: one estimate, all randomness from ``rng``.
@@ -350,9 +350,9 @@ def fopg(samples: int) -> ObjectiveEstimator:
 
 
 def variance_bias_sweep(
-    make_objective: Callable[[SmoothingPolicy, GradientMode, int], PolicyObjective],
+    make_objective: Callable[[Smoothing, GradientMode, int], PolicyObjective],
     theta,
-    policies: Mapping[str, SmoothingPolicy],
+    policies: Mapping[str, Smoothing],
     horizons: Sequence[int],
     *,
     batches: int,
@@ -363,13 +363,13 @@ def variance_bias_sweep(
     reference_batches: int = 16,
     progress: Callable[[str], None] | None = None,
 ) -> list[dict]:
-    """Variance (and, with ``reference_samples``, bias) of an estimator over smoothing policies,
+    """Variance (and, with ``reference_samples``, bias) of an estimator over smoothing designs,
     gradient modes and horizons, all at one theta.
 
     Args:
         make_objective: ``(policy, mode, horizon) -> PolicyObjective``.
         theta: (P,) parameters.
-        policies: name -> smoothing policy (e.g. ``{"exact": Exact(), "bs_1e-2": Fixed(1e-2),
+        policies: name -> smoothing (e.g. ``{"exact": Exact(), "bs_1e-2": Fixed(1e-2),
             "abs": ContactAware(1e-2, 0.05)}``); larger mu is more smoothing.
         horizons: horizons H to measure.
         batches: independent estimates per point (K >= 2).
@@ -389,7 +389,7 @@ def variance_bias_sweep(
         a reference ``bias`` (a :class:`BiasStats` dict).
     """
     if not policies:
-        raise ValueError("policies must name at least one smoothing policy")
+        raise ValueError("policies must name at least one smoothing")
     hs = [_check_int(h, "horizons[i]", 1) for h in horizons]
     if not hs:
         raise ValueError("horizons must contain at least one horizon")

@@ -6,7 +6,7 @@ Smoothing designs (:data:`SMOOTHINGS`) are named once too: ``exact`` (hard conta
 ``bs`` (barrier smoothing: one fixed mu for every contact) and ``abs`` (adaptive barrier
 smoothing: the contact-aware mu(x, u), large only near contact). **A larger mu means more
 smoothing.** A method refers to a design by that name; its numbers (mu, mu_max, length) are the
-experiment's settings, passed to :meth:`Method.smoothing_policy`.
+experiment's settings, passed to :meth:`Method.make_smoothing`.
 
 A method is either a gradient estimator (``estimator`` in :data:`ESTIMATORS`, run by
 :meth:`Method.estimate`) or a trainer of its own (``"ars"``, ``"mbpo"``: they do not estimate a
@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, SmoothingPolicy
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, Smoothing
 from drake_abs.policy.estimators import (
     GradientEstimate,
     PolicyObjective,
@@ -33,7 +33,7 @@ from drake_abs.policy.estimators import (
 )
 from drake_abs.policy.pipps import pipps
 
-__all__ = ["ESTIMATORS", "METHODS", "SMOOTHINGS", "Method", "method", "smoothing_policy"]
+__all__ = ["ESTIMATORS", "METHODS", "SMOOTHINGS", "Method", "method", "make_smoothing"]
 
 #: smoothing design -> its display label
 SMOOTHINGS = {
@@ -45,13 +45,13 @@ SMOOTHINGS = {
 ESTIMATORS = ("first_order", "zeroth_order", "alpha_order", "pipps")
 
 
-def smoothing_policy(
+def make_smoothing(
     design: str,
     *,
     mu: float | None = None,
     contact_aware: tuple[float, float] | None = None,
-) -> SmoothingPolicy:
-    """The :class:`~drake_abs.contact.smoothing.SmoothingPolicy` of a design of
+) -> Smoothing:
+    """The :class:`~drake_abs.contact.smoothing.Smoothing` of a design of
     :data:`SMOOTHINGS`: ``exact``; ``bs`` at ``mu`` (N s m, the central-path value of every
     contact); ``abs`` with ``contact_aware = (mu_max, length)`` (N s m, m). Larger mu is more
     smoothing."""
@@ -107,11 +107,11 @@ class Method:
         """Whether :meth:`estimate` applies (False for the trainers ARS and MBPO)."""
         return self.estimator in ESTIMATORS
 
-    def smoothing_policy(
+    def make_smoothing(
         self, *, mu: float | None = None, contact_aware: tuple[float, float] | None = None
-    ) -> SmoothingPolicy:
+    ) -> Smoothing:
         """The model's smoothing with the experiment's numbers (the method's own mu first)."""
-        return smoothing_policy(
+        return make_smoothing(
             self.smoothing, mu=self.mu if self.mu is not None else mu, contact_aware=contact_aware
         )
 

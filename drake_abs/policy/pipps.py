@@ -60,7 +60,7 @@ from typing import Literal
 
 import numpy as np
 
-from drake_abs.contact.unconverged import UnconvergedStepError, apply_unconverged_policy
+from drake_abs.contact.unconverged import UnconvergedStepError, apply_on_unconverged
 from drake_abs.engine import record
 from drake_abs.policy.estimators import GradientEstimate, PolicyObjective
 
@@ -161,7 +161,7 @@ def pipps_detailed(
     M = int(M)
     noise = obj.noise(rng, M)
     fwd = _forward(obj, theta, noise)
-    used = apply_unconverged_policy(fwd.converged, obj.on_unconverged)
+    used = apply_on_unconverged(fwd.converged, obj.on_unconverged)
     n_used = int(used.sum())
     if n_used < 2:
         raise UnconvergedStepError(

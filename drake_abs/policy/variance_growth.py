@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
-from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, SmoothingPolicy
+from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched, Smoothing
 
 __all__ = [
     "curve_label",
@@ -33,11 +33,11 @@ def sweep_smoothings(
     fixed_mus: Iterable[float],
     contact_aware: tuple[float, float],
     gaussian_sigma: float | None = None,
-) -> dict[str, SmoothingPolicy]:
+) -> dict[str, Smoothing]:
     """The smoothings of a sweep under their curve names: ``"exact"``, ``"BS mu=<mu>"`` per
     fixed mu (larger is smoother), ``"ABS contact-aware"`` (``contact_aware`` = (mu_max, length
     in m)) and, with ``gaussian_sigma`` (m), ``"ABS Gaussian-matched"``."""
-    out: dict[str, SmoothingPolicy] = {"exact": Exact()}
+    out: dict[str, Smoothing] = {"exact": Exact()}
     out.update({f"{BS_PREFIX}{mu:g}": Fixed(mu) for mu in fixed_mus})
     out["ABS contact-aware"] = ContactAware(*contact_aware)
     if gaussian_sigma is not None:

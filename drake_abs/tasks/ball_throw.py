@@ -22,7 +22,7 @@ from typing import ClassVar
 import numpy as np
 
 from drake_abs.contact.lcs import GradientMode, LcsStepper
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.contact.step import Step
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.policy.rewards import QuadraticReward
@@ -103,7 +103,7 @@ class ThrowStepper:
 
 
 def throw_objective(
-    smoothing: SmoothingPolicy | None = None,
+    smoothing: Smoothing | None = None,
     gradient: GradientMode = "frozen",
     *,
     height: float = 1.0,

@@ -36,7 +36,7 @@ import numpy as np
 from drake_abs.contact.cone import FrictionCone, expand_mu
 from drake_abs.contact.contact_lcp import CONTACT_SOLVER_DEFAULTS
 from drake_abs.contact.lcs import LCS, GradientMode, LcsStepper
-from drake_abs.contact.smoothing import Exact, SmoothingPolicy, WrappedPolicy
+from drake_abs.contact.smoothing import Exact, Smoothing, WrappedSmoothing
 from drake_abs.contact.step_data import StepQuantities
 from drake_abs.contact.stewart_trinkle import assemble_lcp
 
@@ -47,8 +47,8 @@ _NORMAL = np.array([[0.0, 1.0]])
 
 
 @dataclass(frozen=True)
-class PerContactSmoothing(WrappedPolicy):
-    """A smoothing policy applied to a frictional LCP's rows the way ``contact_step`` does.
+class PerContactSmoothing(WrappedSmoothing):
+    """A smoothing applied to a frictional LCP's rows the way ``contact_step`` does.
 
     ``contact`` sees the normal rows (z (B, nc), F_nn) and gives one mu per contact (larger is
     smoother); friction and cone rows of that contact get mu / h. In the ``total`` gradient mode
@@ -56,7 +56,7 @@ class PerContactSmoothing(WrappedPolicy):
     ``contact``'s.
     """
 
-    contact: SmoothingPolicy
+    contact: Smoothing
     cone: FrictionCone
     time_step: float
 
@@ -170,14 +170,14 @@ class TranslatingBox:
             time_step=h,
         )
 
-    def smoothing(self, contact: SmoothingPolicy | None = None) -> PerContactSmoothing:
+    def smoothing(self, contact: Smoothing | None = None) -> PerContactSmoothing:
         """The per-contact policy ``contact`` (default Exact) applied to this LCS's rows."""
         return PerContactSmoothing(
             Exact() if contact is None else contact, self.cone, self.time_step
         )
 
     def stepper(
-        self, contact: SmoothingPolicy | None = None, gradient: GradientMode = "total"
+        self, contact: Smoothing | None = None, gradient: GradientMode = "total"
     ) -> LcsStepper:
         """A batched :class:`~drake_abs.contact.lcs.LcsStepper` of this box."""
         return LcsStepper(self.lcs, self.smoothing(contact), gradient)

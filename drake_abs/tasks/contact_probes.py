@@ -25,7 +25,7 @@ import numpy as np
 
 from drake_abs._validation import as_count, as_finite_array
 from drake_abs.contact.lcs import LcsStepper
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.engine import open_loop
 from drake_abs.tasks.box_lcs import TranslatingBox
 from drake_abs.tasks.point_mass import point_mass_lcs
@@ -61,7 +61,7 @@ def drop_response(
     drop_speed: float,
     steps: int,
     time_step: float,
-    smoothing: SmoothingPolicy | None = None,
+    smoothing: Smoothing | None = None,
 ) -> Response:
     """The dropped point mass from each height (B,) (m): its vertical velocity after ``steps``
     steps of ``time_step`` s (m/s) and the derivative in the height (1/s), under ``smoothing``
@@ -77,7 +77,7 @@ def drop_response(
 
 
 def push_response(
-    box: TranslatingBox, forces, *, steps: int, smoothing: SmoothingPolicy | None = None
+    box: TranslatingBox, forces, *, steps: int, smoothing: Smoothing | None = None
 ) -> Response:
     """``box`` from rest pushed by each constant force (B,) (N) for ``steps`` steps: its final
     position (m) and the derivative in the force (m/N), under the per-contact ``smoothing``

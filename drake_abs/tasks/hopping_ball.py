@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from drake_abs.contact.lcs import GradientMode, LcsStepper
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.engine.protocols import Reward
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.policy.policies import LinearPolicy
@@ -39,7 +39,7 @@ Y_GOAL = 0.2
 
 
 def hopping_ball(
-    smoothing: SmoothingPolicy,
+    smoothing: Smoothing,
     mode: GradientMode = "frozen",
     horizon: int = 200,
     sigma: float = 1.0,

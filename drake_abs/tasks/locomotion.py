@@ -442,7 +442,7 @@ def locomotion_task(
 
     Args:
         name: ``"hopper"`` or ``"half_cheetah"``.
-        smoothing: the contact smoothing policy (default: the scene's, exact contact).
+        smoothing: the contact smoothing (default: the scene's, exact contact).
         reward_options: replace gymnasium's reward settings (``ctrl_cost_weight``, ...; see
             :class:`GymLocomotionReward`).
         stepper: other settings of the scene's stepper

@@ -1,4 +1,4 @@
-"""The smoothing policies' numeric parameters and the LCS's matrices as differentiable
+"""The smoothing designs' numeric parameters and the LCS's matrices as differentiable
 parameters: mu's derivatives with respect to the parameters and to F's diagonal, and a step's
 parameter Jacobians, against central differences (the independent path: re-built policies and
 systems stepped again)."""

@@ -107,7 +107,7 @@ def test_between_leaves_equal_steps_and_exact_policies_alone():
     [
         (lambda: TimeStepScaled(POLICY, 0.0), "scale"),
         (lambda: TimeStepScaled(POLICY, float("nan")), "scale"),
-        (lambda: TimeStepScaled("fixed", 0.5), "policy"),
+        (lambda: TimeStepScaled("fixed", 0.5), "smoothing"),
         (lambda: TimeStepScaled(GaussianMatched(0.002), 0.5), "GaussianMatched"),
         (lambda: TimeStepScaled.between(POLICY, -1.0, 0.01), "time_step"),
         (lambda: TimeStepScaled.between(POLICY, 1e-3, 0.0), "reference_time_step"),

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drake_abs import ContactAware, LcsStepper, open_loop, point_mass_lcs
-from drake_abs.contact.smoothing import SmoothingPolicy
+from drake_abs.contact.smoothing import Smoothing
 from drake_abs.contact.unconverged import UnconvergedStepError, UnconvergedStepWarning
 from drake_abs.lcp import ipm
 from drake_abs.lcp.ipm import LCPConvergenceWarning
@@ -65,7 +65,7 @@ def test_flag_keeps_them_and_raise_refuses():
         open_loop(LcsStepper(_starved()), X0, U, on_unconverged="skip")
 
 
-class _RowMu(SmoothingPolicy):
+class _RowMu(Smoothing):
     """A constant mu per LCP row (the contact step's normal and friction rows)."""
 
     is_constant = True

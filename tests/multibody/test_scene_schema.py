@@ -64,7 +64,7 @@ def test_the_good_file_loads_and_equals_the_scene_built_in_python(tmp_path):
     )
     assert Scene.from_yaml(path) == expected
     assert Scene.from_yaml(GOOD) == expected  # YAML text
-    assert expected.smoothing_policy() == Fixed(1e-4)
+    assert expected.make_smoothing() == Fixed(1e-4)
 
 
 def test_the_file_is_read_by_drakes_yaml_load_typed_with_the_schema(monkeypatch):
@@ -344,4 +344,4 @@ def test_from_dict_checks_against_the_same_schema():
         })  # fmt: skip
     ok = {**Scene.from_yaml(GOOD).to_dict(),
           "smoothing": {"kind": "contact_aware", "mu_max": 1.0, "length": 0.1}}  # fmt: skip
-    assert Scene.from_dict(ok).smoothing_policy() == ContactAware(1.0, 0.1)
+    assert Scene.from_dict(ok).make_smoothing() == ContactAware(1.0, 0.1)

@@ -283,13 +283,13 @@ def test_reference_time_step_wraps_the_scene_policy_and_reaches_the_stepper():
     from drake_abs.contact.smoothing import TimeStepScaled
 
     scene = _barrier_box(1e-3, 0.01)
-    policy = scene.smoothing_policy()
+    policy = scene.make_smoothing()
     assert isinstance(policy, TimeStepScaled) and policy.scale == pytest.approx(0.1)
     assert policy.policy == ContactAware(1e-2, 0.05)
     assert build_scene_model(scene).stepper().smoothing == policy
     assert Scene.from_yaml(scene.to_yaml()) == scene
-    assert _barrier_box(0.01, 0.01).smoothing_policy() == ContactAware(1e-2, 0.05)
-    assert _barrier_box(1e-3, None).smoothing_policy() == ContactAware(1e-2, 0.05)
+    assert _barrier_box(0.01, 0.01).make_smoothing() == ContactAware(1e-2, 0.05)
+    assert _barrier_box(1e-3, None).make_smoothing() == ContactAware(1e-2, 0.05)
     gaussian = {"kind": "gaussian_matched", "sigma": 0.002, "reference_time_step": 0.01}
     with pytest.raises(ValueError, match="reference_time_step"):
         Scene.from_dict({**scene.to_dict(), "smoothing": gaussian})

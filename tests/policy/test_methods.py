@@ -6,7 +6,7 @@ import pytest
 from drake_abs import ContactAware, Exact, Fixed
 from drake_abs.contact.lcs import LcsStepper
 from drake_abs.policy.estimators import PolicyObjective, first_order, zeroth_order
-from drake_abs.policy.methods import METHODS, SMOOTHINGS, Method, method, smoothing_policy
+from drake_abs.policy.methods import METHODS, SMOOTHINGS, Method, make_smoothing, method
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
 from drake_abs.tasks.point_mass import point_mass_lcs
@@ -20,13 +20,13 @@ def test_every_method_names_a_design_and_a_unique_label():
 
 
 def test_smoothing_policies_of_each_design():
-    assert isinstance(method("fopg_exact").smoothing_policy(), Exact)
-    abs_ = method("fopg_abs").smoothing_policy(contact_aware=(1e-2, 0.05))
+    assert isinstance(method("fopg_exact").make_smoothing(), Exact)
+    abs_ = method("fopg_abs").make_smoothing(contact_aware=(1e-2, 0.05))
     assert isinstance(abs_, ContactAware) and abs_ == ContactAware(1e-2, 0.05)
     bs = method("fopg_bs_1e-2")
     assert bs.label == "FOPG mu = 1e-2" and bs.mu == 1e-2
-    assert bs.smoothing_policy(mu=5.0) == Fixed(1e-2)  # the name's mu, not the experiment's
-    assert method("fopg_bs").smoothing_policy(mu=5.0) == Fixed(5.0)
+    assert bs.make_smoothing(mu=5.0) == Fixed(1e-2)  # the name's mu, not the experiment's
+    assert method("fopg_bs").make_smoothing(mu=5.0) == Fixed(5.0)
 
 
 @pytest.mark.parametrize("bad", ["fopg_bs_x", "fopg_bs_-1", "FOPG-ABS", "sac", ""])
@@ -37,9 +37,9 @@ def test_unknown_names_are_refused_with_the_known_ones(bad):
 
 def test_designs_need_their_numbers():
     with pytest.raises(ValueError, match="needs mu"):
-        smoothing_policy("bs")
+        make_smoothing("bs")
     with pytest.raises(ValueError, match="contact_aware"):
-        smoothing_policy("abs")
+        make_smoothing("abs")
     with pytest.raises(ValueError, match="smoothing must be one of"):
         Method("x", "X", "gaussian", "first_order")
     with pytest.raises(ValueError, match="estimator must be one of"):

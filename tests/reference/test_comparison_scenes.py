@@ -26,7 +26,7 @@ def test_start_is_the_scenes_initial_state(name):
     assert u.shape == (model.contact_model.nu,)
     assert duration == (scenes.box_duration if name == "box" else scenes.ball_duration)
     spec = model.scene
-    assert spec.time_step == 0.005 and spec.smoothing_policy().is_exact
+    assert spec.time_step == 0.005 and spec.make_smoothing().is_exact
     assert spec.activation_distance == scenes.activation_distance[name == "ball"]
     assert {c.friction for c in spec.contacts} == {0.3}
 

@@ -117,7 +117,7 @@ def test_bad_construction_arguments():
     """The time step has one source, the LCS: passing it again is refused by name, as is an
     LCS without one."""
     lcs = point_mass_lcs(2)
-    with pytest.raises(ValueError, match=r"smoothing must be a SmoothingPolicy.*lcs.time_step"):
+    with pytest.raises(ValueError, match=r"smoothing must be a Smoothing.*lcs.time_step"):
         LcsPlant(lcs, 0.02)
     with pytest.raises(ValueError, match="gradient must be 'frozen' or 'total'"):
         LcsPlant(lcs, None, "full")
