@@ -36,6 +36,7 @@ import json
 import os
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_abs/__init__
@@ -43,6 +44,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see drake_ab
 import numpy as np
 
 from drake_abs.contact.smoothing import ContactAware, Exact, Fixed, GaussianMatched
+from drake_abs.contact.unconverged import UnconvergedStepWarning
+from drake_abs.engine import rollout
 from drake_abs.lcp import ipm
 from drake_abs.lcp.ipm import LCPConvergenceWarning
 from drake_abs.multibody import Scene, build_scene_model
@@ -53,6 +56,7 @@ from drake_abs.multibody.posture import (
     stepping_controller,
 )
 from drake_abs.multibody.stepper import StepOverflowWarning
+from drake_abs.policy.controls import TimeVaryingController
 
 SMOOTHINGS = {
     "exact": Exact(),
@@ -98,6 +102,32 @@ def _initial_states(name: str, model, rng: np.random.Generator, B: int) -> np.nd
     return x
 
 
+class _RestartFailed:
+    """The benchmark's stepper: the scene's, with a rollout whose step failed started again
+    from a fresh initial state (the failed step is not taken forward), counting as it goes."""
+
+    parameter_names = ()
+
+    def __init__(self, stepper, fresh, offset: int = 0):
+        self.stepper, self.fresh, self.t = stepper, fresh, offset
+        self.solved, self.unconverged, self.iterations, self.failures = 0, 0, [], []
+
+    def step(self, x, u, *, jacobians=False, parameters=False):
+        r = self.stepper.step(x, u, jacobians=False)
+        lcp = r.iterations > 0
+        self.solved += int(lcp.sum())
+        bad = np.flatnonzero(~r.converged)
+        self.unconverged += bad.size
+        self.failures += [{"rollout": int(b), "step": self.t} for b in bad]
+        self.iterations += r.iterations[lcp].tolist()
+        self.t += 1
+        if not bad.size:
+            return r
+        x_next = r.x_next.copy()
+        x_next[bad] = self.fresh(bad.size)
+        return replace(r, x_next=x_next)
+
+
 def run_pair(
     scene_name: str, smoothing_name: str, steps: int, seed: int, friction: str = "stewart_trinkle"
 ) -> dict:
@@ -109,27 +139,29 @@ def run_pair(
         smoothing = scene.make_smoothing()
         if not isinstance(smoothing, ContactAware):
             smoothing = ContactAware(1e-3, 0.02)
-    stepper = model.stepper(smoothing=smoothing, friction=friction)
     rng = np.random.default_rng(seed)
     u_of = _controller(scene_name, model, rng)
     horizon = int(np.ceil(steps / BATCH))
-    x = _initial_states(scene_name, model, rng, BATCH)
-    solved = unconverged = 0
-    iterations, failures = [], []
+    log = _RestartFailed(
+        model.stepper(smoothing=smoothing, friction=friction),
+        lambda n: _initial_states(scene_name, model, rng, n),
+    )
+    nx, nu = model.x0.size, model.contact_model.nu
     start = time.perf_counter()
-    for t in range(horizon):
-        if t and t % 200 == 0:  # a new episode every 200 steps: the scene's own start again
-            x = _initial_states(scene_name, model, rng, BATCH)
-        r = stepper.step(x, u_of(t * scene.time_step, x), jacobians=False)
-        lcp = r.iterations > 0
-        solved += int(lcp.sum())
-        bad = np.flatnonzero(~r.converged)
-        unconverged += bad.size
-        failures += [{"rollout": int(b), "step": t} for b in bad]
-        iterations += r.iterations[lcp].tolist()
-        x = r.x_next
-        if bad.size:  # a failed step is not taken forward: that rollout starts again
-            x[bad] = _initial_states(scene_name, model, rng, bad.size)
+    for t0 in range(0, horizon, 200):  # an episode of up to 200 steps from fresh states
+        x0 = _initial_states(scene_name, model, rng, BATCH)
+        length = min(200, horizon - t0)
+        policy = TimeVaryingController(
+            lambda t, x, t0=t0: u_of((t0 + t) * scene.time_step, x), nx, nu
+        )
+        rollout(log, policy, np.zeros(0), x0, np.zeros((BATCH, length, nu)), sigma=0.0,
+                gradient=False, on_unconverged="flag")  # fmt: skip
+    solved, unconverged, iterations, failures = (
+        log.solved,
+        log.unconverged,
+        log.iterations,
+        log.failures,
+    )
     it = np.array(iterations) if iterations else np.zeros(1)
     return {
         "scene": scene_name, "smoothing": smoothing_name, "steps": horizon * BATCH,
@@ -153,6 +185,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore", LCPConvergenceWarning)  # counted below
     warnings.simplefilter("ignore", StepOverflowWarning)
+    warnings.simplefilter("ignore", UnconvergedStepWarning)  # counted by the stepper
     runs = [run for run in (("before", False, "stewart_trinkle"), ("ST", True, "stewart_trinkle"),
             ("Anitescu", True, "anitescu")) if run[0] in args.runs]  # fmt: skip
     if not runs:
