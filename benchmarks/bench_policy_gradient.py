@@ -27,8 +27,9 @@ Rows:
   ``rollout_return`` converts the diagram to AutoDiffXd in every call; that conversion's time
   is measured and printed separately.
 - **Drake SAP / Similar, plant with the policy in Python between steps**: the plant + SceneGraph
-  alone in AutoDiffXd, stepped by the Simulator one step at a time, the policy and the reward
-  evaluated on AutoDiffXd values between steps. Gives the trajectories.
+  as a ``DrakePlantStepper`` in the engine (one discrete update per step, its Jacobians by
+  AutoDiffXd), the policy and the reward in Python between steps, the gradient by the engine's
+  reverse pass. Gives the trajectories.
 - **Drake SAP / Similar, plant only (lower bound)**: the plant + SceneGraph alone in
   AutoDiffXd, its input fixed to a value carrying the same 5 derivatives, advanced over the
   whole horizon in one C++ call: what Drake's plant costs per rollout before any closed loop.
@@ -67,6 +68,7 @@ from drake_abs.multibody import build_scene_model
 from drake_abs.multibody.scene import Scene
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.reference.drake_plant import DrakePlantStepper
 from drake_abs.reference.drake_twin import make_drake_twin
 from drake_abs.tasks.box_lcs import TranslatingBox
 
@@ -193,45 +195,15 @@ def _reward_ad(reward: QuadraticReward, x, u):
     return -(e @ reward.Q @ e) - (u @ reward.R @ u)
 
 
-def drake_plant_only(scene, approximation, policy, reward, theta, x0, noise, h) -> dict:
-    """The plant + SceneGraph in AutoDiffXd, one rollout at a time, the policy and the reward
-    on AutoDiffXd values between steps: returns, gradients, states, seconds."""
-    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
-    from pydrake.systems.analysis import Simulator_
-
-    twin = make_drake_twin(scene, approximation, sampled_outputs=False)
-    diagram = twin.diagram.ToAutoDiffXd()
-    plant = diagram.GetSubsystemByName(twin.plant.get_name())
-    P = theta.size
-    th = InitializeAutoDiff(theta.reshape(-1, 1)).ravel()
-    nu, nx = policy.nu, policy.nx
-    K, k = th[: nu * nx].reshape(nu, nx), th[nu * nx :]
-    returns, grads, states = [], [], []
+def drake_plant_only(scene, approximation, policy, reward, theta, x0, noise) -> dict:
+    """The plant + SceneGraph as a :class:`~drake_abs.reference.drake_plant.DrakePlantStepper`
+    in the engine: the policy and the reward in Python between Drake's steps, the gradient by
+    the engine's reverse pass over Drake's one-step AutoDiffXd Jacobians."""
+    stepper = DrakePlantStepper(scene, approximation)
     start = time.perf_counter()
-    for m in range(len(noise)):
-        simulator = Simulator_[AutoDiffXd](diagram)
-        context = simulator.get_mutable_context()
-        pctx = plant.GetMyMutableContextFromRoot(context)
-        plant.SetPositionsAndVelocities(pctx, [AutoDiffXd(v, np.zeros(P)) for v in x0])
-        port = plant.get_actuation_input_port()
-        simulator.Initialize()
-        J = AutoDiffXd(0.0, np.zeros(P))
-        xs = []
-        for t in range(noise.shape[1]):
-            x = plant.GetPositionsAndVelocities(pctx)
-            xs.append(ExtractValue(x).ravel())
-            u = K @ x + k + SIGMA * noise[m, t]
-            J = J + _reward_ad(reward, x, u)
-            port.FixValue(pctx, u)
-            simulator.AdvanceTo((t + 1) * h)
-        x = plant.GetPositionsAndVelocities(pctx)
-        xs.append(ExtractValue(x).ravel())
-        returns.append(J.value())
-        grads.append(ExtractGradient(np.array([J]))[0])
-        states.append(np.array(xs))
+    traj = rollout(stepper, policy, theta, x0, noise, reward, sigma=SIGMA)
     seconds = time.perf_counter() - start
-    return {"seconds": seconds, "returns": np.array(returns), "grad": np.array(grads),
-            "x": np.array(states)}  # fmt: skip
+    return {"seconds": seconds, "returns": traj.returns, "grad": traj.grad, "x": traj.x}
 
 
 def drake_plant_lower_bound(scene, approximation, P: int, x0, n: int, horizon: int, h) -> dict:
@@ -326,7 +298,7 @@ def main(argv=None) -> int:
             scene, approx, policy, reward, theta, x0, noise[:n], box.time_step
         )
         drake[f"{approx}_plant_policy_in_python"] = drake_plant_only(
-            scene, approx, policy, reward, theta, x0, noise[:n], box.time_step
+            scene, approx, policy, reward, theta, x0, noise[:n]
         )
         drake[f"{approx}_plant_only_lower_bound"] = drake_plant_lower_bound(
             scene, approx, theta.size, x0, n, H, box.time_step
