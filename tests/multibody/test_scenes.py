@@ -279,14 +279,14 @@ def _barrier_box(time_step: float, reference_time_step: float | None) -> Scene:
     return Scene.from_dict({**data, "activation_distance": float("inf")})
 
 
-def test_reference_time_step_wraps_the_scene_policy_and_reaches_the_stepper():
+def test_reference_time_step_wraps_the_scene_smoothing_and_reaches_the_stepper():
     from drake_abs.contact.smoothing import TimeStepScaled
 
     scene = _barrier_box(1e-3, 0.01)
-    policy = scene.make_smoothing()
-    assert isinstance(policy, TimeStepScaled) and policy.scale == pytest.approx(0.1)
-    assert policy.policy == ContactAware(1e-2, 0.05)
-    assert build_scene_model(scene).stepper().smoothing == policy
+    smoothing = scene.make_smoothing()
+    assert isinstance(smoothing, TimeStepScaled) and smoothing.scale == pytest.approx(0.1)
+    assert smoothing.smoothing == ContactAware(1e-2, 0.05)
+    assert build_scene_model(scene).stepper().smoothing == smoothing
     assert Scene.from_yaml(scene.to_yaml()) == scene
     assert _barrier_box(0.01, 0.01).make_smoothing() == ContactAware(1e-2, 0.05)
     assert _barrier_box(1e-3, None).make_smoothing() == ContactAware(1e-2, 0.05)
