@@ -48,10 +48,9 @@ def _scenes() -> None:
 
     for name in ("box_push", "hopper"):
         model = build_scene_model(name)
-        x = model.x0
-        u = np.zeros(model.contact_model.nu)
-        for policy in (Exact(), None):  # exact, and the scene's own smoothing
-            stepper = model.stepper(smoothing=policy)
+        x, u = model.x0, np.zeros(model.contact_model.nu)
+        for smoothing in (Exact(), None):  # exact, and the scene's own smoothing
+            stepper = model.stepper(smoothing=smoothing)
             for jac in (False, True):
                 stepper.step(x[None], u, jacobians=jac)  # one state: the shared-kinematics path
                 stepper.step(np.tile(x, (3, 1)), u, jacobians=jac)  # a batch

@@ -189,7 +189,7 @@ class LCS:
         Args:
             x: (dx,) or (B, dx) states.
             u: (du,) or (B, du) inputs (one input broadcasts over the batch).
-            smoothing: the per-contact mu policy (default :class:`Exact`); larger mu is smoother.
+            smoothing: mu per contact (default :class:`Exact`); larger mu is smoother.
             gradient: ``"total"`` (default) also differentiates mu(z) through z: the derivative
                 of the step as computed. ``"frozen"`` treats mu as a constant (Zhang et al. 2023,
                 Algorithm 1): biased wherever mu depends on the state.
@@ -322,7 +322,7 @@ class LcsStepper:
 
     Args:
         lcs: the system.
-        smoothing: the per-contact mu policy (default :class:`Exact`); larger mu is smoother.
+        smoothing: mu per contact (default :class:`Exact`); larger mu is smoother.
         gradient: ``"total"`` (default) or ``"frozen"`` (see :meth:`LCS.step`).
     """
 
@@ -348,7 +348,7 @@ class LcsStepper:
         smoothing_parameters: bool = False,
     ) -> Step:
         """``LCS.step`` with this stepper's smoothing and gradient mode (``parameters``: the
-        matrices' entries; ``smoothing_parameters``: the policy's, after them)."""
+        matrices' entries; ``smoothing_parameters``: the smoothing's, after them)."""
         return self.lcs.step(
             x,
             u,

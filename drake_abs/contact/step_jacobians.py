@@ -70,7 +70,7 @@ def step_jacobians(
         quant.dW_dot(f), z.shape[1],
     )  # fmt: skip
     dN = quant.dN
-    # mu's own derivative: only where mu depends on the state (for a constant policy dmu_dz is
+    # mu's own derivative: only where mu depends on the state (for a constant smoothing dmu_dz is
     # 0, and the total derivative is the frozen one)
     total = gradient == "total" and not smoothing.is_constant
     if total:

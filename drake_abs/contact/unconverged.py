@@ -2,7 +2,7 @@
 
 Such a step's impulses, next state and Jacobians are not those of the model (a solve stopped
 after 2 iterations gave Jacobians 0.38 off). Rollouts and estimators therefore take an explicit
-policy, ``on_unconverged``:
+choice, ``on_unconverged``:
 
 - ``"drop"`` (the default): the rollout is marked unused, its derivatives are NaN, and averages
   run over the rest; a :class:`UnconvergedStepWarning` says how many were dropped;

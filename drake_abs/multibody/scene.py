@@ -112,11 +112,12 @@ DYNAMICS = ("auto", "pinocchio", "drake")
 
 @dataclass(frozen=True)
 class _Smoothing:
-    """What every kind of smoothing has: its ``kind`` (the name a file gives), the policy it
-    makes, and the time step mu is stated at."""
+    """What every kind of smoothing has: its ``kind`` (the name a file gives), the
+    :class:`~drake_abs.contact.smoothing.Smoothing` it builds, and the time step mu is stated
+    at."""
 
     kind: ClassVar[str]
-    policy_type: ClassVar[type[Smoothing]]
+    smoothing_type: ClassVar[type[Smoothing]]
 
     reference_time_step: float | None = key(
         "a number > 0: the time step mu is stated at (s), or null",
@@ -130,12 +131,12 @@ class _Smoothing:
         kw_only=True,
     )
 
-    def policy(self) -> Smoothing:
+    def build(self) -> Smoothing:
         """The smoothing, at the reference time step (``ValueError`` for parameters it
         refuses)."""
         own = {f.name: getattr(self, f.name) for f in fields(self)}
         del own["reference_time_step"]
-        return self.policy_type(**own)
+        return self.smoothing_type(**own)
 
 
 @documented
@@ -144,7 +145,7 @@ class ExactSmoothing(_Smoothing):
     """``kind: exact``, the default: hard contact (:class:`~drake_abs.contact.smoothing.Exact`)."""
 
     kind = "exact"
-    policy_type = Exact
+    smoothing_type = Exact
 
 
 @documented
@@ -154,7 +155,7 @@ class FixedSmoothing(_Smoothing):
     (:class:`~drake_abs.contact.smoothing.Fixed`); larger is smoother."""
 
     kind = "fixed"
-    policy_type = Fixed
+    smoothing_type = Fixed
 
     value: float = key("a number >= 0: mu of kind fixed (m N s)")
 
@@ -166,7 +167,7 @@ class ContactAwareSmoothing(_Smoothing):
     (:class:`~drake_abs.contact.smoothing.ContactAware`)."""
 
     kind = "contact_aware"
-    policy_type = ContactAware
+    smoothing_type = ContactAware
 
     mu_max: float = key("a number > 0: contact_aware's mu at contact (m N s)")
     length: float = key("a number > 0: contact_aware's decay length (m)")
@@ -180,7 +181,7 @@ class GaussianMatchedSmoothing(_Smoothing):
     (:class:`~drake_abs.contact.smoothing.GaussianMatched`); a larger sigma is smoother."""
 
     kind = "gaussian_matched"
-    policy_type = GaussianMatched
+    smoothing_type = GaussianMatched
 
     sigma: float = key("a number > 0: gaussian_matched's noise scale (m)")
     c1: float = key("a number: gaussian_matched's c1", default=0.0)
@@ -390,34 +391,34 @@ class Scene:
             if values is not None and not np.all(np.isfinite(values)):
                 at = f"initial_state.{part}"
                 raise _Problem(at, f"{at} must be a list of finite numbers")
-        self._smoothing_policy()  # its parameters checked now, not at the first step
+        self._built_smoothing()  # its parameters checked now, not at the first step
 
     def make_smoothing(self) -> Smoothing:
         """The smoothing object this scene names, at this scene's time step: when the
-        smoothing states a ``reference_time_step`` other than ``time_step``, the named policy
+        smoothing states a ``reference_time_step`` other than ``time_step``, the named smoothing
         wrapped in :class:`~drake_abs.contact.smoothing.TimeStepScaled` (mu times
         ``time_step / reference_time_step``)."""
         try:
-            return self._smoothing_policy()
+            return self._built_smoothing()
         except _Problem as problem:
             raise ValueError(f"scene {self.name!r}: {problem.message}") from problem
 
-    def _smoothing_policy(self) -> Smoothing:
+    def _built_smoothing(self) -> Smoothing:
         spec = self.smoothing
         try:
-            policy = spec.policy()
+            smoothing = spec.build()
         except ValueError as err:
             raise _Problem("smoothing", f"smoothing: {err}") from err
         reference = spec.reference_time_step
         if reference is None:
-            return policy
+            return smoothing
         at = "smoothing.reference_time_step"
         if not (np.isfinite(reference) and reference > 0):
             raise _Problem(at, f"{at} must be a finite number > 0 (s); got {reference!r}")
         if isinstance(spec, GaussianMatchedSmoothing):
             raise _Problem(at, f"{at} does not apply to gaussian_matched (its impulse does not "
                            "scale with mu; choose sigma for the time step)")  # fmt: skip
-        return TimeStepScaled.between(policy, self.time_step, reference)
+        return TimeStepScaled.between(smoothing, self.time_step, reference)
 
     @property
     def num_contacts(self) -> int:

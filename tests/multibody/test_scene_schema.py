@@ -104,7 +104,7 @@ def test_the_schema_is_the_scene_and_each_key_is_documented_once():
     assert sorted(SMOOTHING_KINDS) == ["contact_aware", "exact", "fixed", "gaussian_matched"]
     for member in SMOOTHING_KINDS.values():
         own = {f.name for f in dataclasses.fields(member)} - {"reference_time_step"}
-        assert own == {f.name for f in dataclasses.fields(member.policy_type) if f.name != "g"}
+        assert own == {f.name for f in dataclasses.fields(member.smoothing_type) if f.name != "g"}
     # every key has its form and is listed, with it, in its class's docstring (the API reference)
     for schema in (Scene, ModelSpec, ContactSpec, PairSpec, InitialState,
                    *SMOOTHING_KINDS.values()):  # fmt: skip
