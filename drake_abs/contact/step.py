@@ -30,7 +30,8 @@ class Step:
         iterations: (B,) interior-point iterations (0 where no LCP was solved).
         impulse: (B, nc) contact impulses (N s): for an LCS, the complementarity variable lam
             of every row; for a rigid-body scene, each contact candidate's normal impulse (0
-            when the candidate was left out). nc = 0 for a model without contact.
+            when the candidate was left out), Drake's plant included; for MuJoCo, each geom's
+            normal impulse. nc = 0 for a model without contact.
         mu: (B, nc) central-path value reached per contact (0 when left out).
         dx_dx, dx_du: (B, nx, nx), (B, nx, nu) (None unless Jacobians were asked for).
         dimpulse_dx, dimpulse_du: (B, nc, nx), (B, nc, nu) (likewise).
