@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from drake_abs._validation import batch_of_states
 from drake_abs.contact.cone import FORMULATIONS, FrictionCone
 from drake_abs.contact.contact_lcp import contact_step
 from drake_abs.contact.damping import damped_parameters
@@ -344,22 +345,7 @@ class ComplementarityStepper:
         effort limits as the step applies it; and which entries were clipped (B, nu), or None
         where none was."""
         nq, nv, nu, _ = self.sizes
-        x = np.asarray(x, dtype=float)
-        if x.ndim == 1:
-            x = x[None]
-        if x.ndim != 2 or x.shape[1] != nq + nv:
-            raise ValueError(f"x must have shape (B, nq + nv) = (B, {nq + nv}); got {x.shape}")
-        B = x.shape[0]
-        u = np.asarray(u, dtype=float)
-        if u.shape != (B, nu):
-            try:
-                u = np.broadcast_to(u, (B, nu))
-            except ValueError:
-                raise ValueError(
-                    f"u must have shape (B, nu) = ({B}, {nu}) or (nu,); got {u.shape}"
-                ) from None
-        if not (np.isfinite(x).all() and np.isfinite(u).all()):
-            raise ValueError("x and u must be finite")
+        x, u, _ = batch_of_states(x, u, nq + nv, nu)
         saturated = None
         if self._clips:  # effort limits: the input applied is clipped
             saturated = np.abs(u) > self.effort
