@@ -89,15 +89,8 @@ class DrakePlantStepper:
         self.nu = plant.num_actuators()
         self._context = twin.diagram.CreateDefaultContext()
         self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
-        inspector = twin.scene_graph.model_inspector()
-        # geometry -> contact candidate: "contact_k" (a point) or "pair_k_a"/"pair_k_b" (a pair)
-        self._candidate: dict[object, int] = {}
-        for g in inspector.GetAllGeometryIds():
-            name = inspector.GetName(g).rsplit("::", 1)[-1]
-            kind, _, rest = name.partition("_")
-            if kind in ("contact", "pair") and rest.split("_")[0].isdigit():
-                self._candidate[g] = int(rest.split("_")[0])
-        self.nc = max(self._candidate.values(), default=-1) + 1
+        self._candidate = twin.candidates  # geometry -> contact candidate
+        self.nc = twin.num_candidates
         self._autodiff = None  # the AutoDiffXd diagram, made when Jacobians are first asked for
 
     # pickling: Drake's systems cannot be pickled; the settings are, and rebuild the twin

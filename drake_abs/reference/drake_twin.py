@@ -12,7 +12,7 @@ compliant hydroelastic, against a rigid hydroelastic ground box."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import (
@@ -64,9 +64,16 @@ HYDROELASTIC_GROUND_WIDTH = 20.0
 
 @dataclass(frozen=True)
 class DrakeTwin:
+    """The twin's diagram (plant + SceneGraph), its plant and SceneGraph, and which of the
+    scene's ``num_candidates`` contact candidates each registered collision geometry stands for
+    (``candidates``: geometry id -> candidate index; a pair's two shapes map to the same index;
+    empty, with no candidates, under hydroelastic contact)."""
+
     diagram: Diagram
     plant: MultibodyPlant
     scene_graph: SceneGraph
+    candidates: dict = field(default_factory=dict)
+    num_candidates: int = 0
 
 
 def _properties(mu: float, material: dict | None) -> ProximityProperties:
@@ -167,7 +174,7 @@ def make_drake_twin(
             _properties(mu_ground, material),
         )
         on_ground = []
-    pairs = []
+    pairs, candidates = [], {}
     for k, contact in enumerate(contacts if hydro is None else ()):
         if isinstance(contact, PairContact):
             # the pair's own copies of its two shapes, both with the pair's coefficient
@@ -178,6 +185,7 @@ def make_drake_twin(
                 _register_shape(plant, contact.body_b, contact.model_b, contact.shape_b,
                                 f"pair_{k}_b", _properties(mu, material)),
             ])  # fmt: skip
+            candidates.update(dict.fromkeys(pairs[-1], k))
             continue
         mu = contact.friction or 0.0
         if 0.0 < mu < mu_ground:
@@ -189,6 +197,7 @@ def make_drake_twin(
             f"contact_{k}",
             _properties(mu, material),
         ))  # fmt: skip
+        candidates[on_ground[-1]] = k
     # only the scene's contacts: points against the ground, each pair's shapes against each
     # other. Every proximity geometry is excluded first, the model files' own collision shapes
     # included (an MJCF's capsules and floor plane would otherwise touch the ground and the
@@ -207,7 +216,8 @@ def make_drake_twin(
         builder.ExportInput(plant.get_actuation_input_port(), "actuation")
     builder.ExportOutput(plant.get_state_output_port(), "state")
     diagram = builder.Build()
-    return DrakeTwin(diagram, plant, scene_graph)
+    n = len(contacts) if hydro is None else 0
+    return DrakeTwin(diagram, plant, scene_graph, candidates, n)
 
 
 def _hydroelastic_contacts(plant, scene_graph, scene, points, mu_ground, material, hydro):
