@@ -24,6 +24,7 @@ otherwise ``ValueError`` says which.
 from __future__ import annotations
 
 import copy
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +32,7 @@ import numpy as np
 from drake_abs._validation import as_count, batch_of_states
 from drake_abs.contact.step import Step
 
-__all__ = ["INTEGRATORS", "MujocoStepper", "apply_options"]
+__all__ = ["INTEGRATORS", "MujocoDivergenceWarning", "MujocoStepper", "apply_options"]
 
 #: The integrators :func:`apply_options` can set (MuJoCo's names).
 INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
@@ -71,6 +72,10 @@ def apply_options(model, options: dict | None) -> None:
         model.jnt_stiffness[:] = 0.0
 
 
+class MujocoDivergenceWarning(UserWarning):
+    """A MuJoCo step diverged and MuJoCo reset its state; the step is flagged unconverged."""
+
+
 class MujocoStepper:
     """A MuJoCo model as a :class:`~drake_abs.engine.Stepper`.
 
@@ -85,7 +90,8 @@ class MujocoStepper:
     on each geom over the step (a contact between two geoms counts for both), ``limit_impulse``
     (B, njnt) each joint's limit impulse (N s or N m s; 0 for a joint without a limit),
     ``iterations`` the solver's iterations summed over the frame skip, ``mu`` zeros (ngeom),
-    ``converged`` True.
+    ``converged`` False where MuJoCo diverged and reset the state during the step (with a
+    :class:`MujocoDivergenceWarning`), True otherwise.
 
     Use :meth:`from_gymnasium` for the model of a gymnasium environment.
     """
@@ -186,6 +192,7 @@ class MujocoStepper:
         impulse = np.zeros((B, m.ngeom))
         limit = np.zeros((B, m.njnt))
         iterations = np.zeros(B, int)
+        converged = np.ones(B, bool)
         dx = np.empty((B, nx, nx)) if jacobians else None
         du = np.empty((B, nx, self.nu)) if jacobians else None
         A = np.empty((2 * self.nv + self.na,) * 2)
@@ -194,6 +201,7 @@ class MujocoStepper:
             data.ctrl[:] = u[b]
             if jacobians:
                 dx[b], du[b] = np.eye(nx), 0.0
+            resets = self._resets(data)
             for _ in range(self.frame_skip):
                 if jacobians:
                     mujoco.mjd_transitionFD(m, data, self.fd_eps, self.fd_centered, A, Bm,
@@ -205,9 +213,21 @@ class MujocoStepper:
                 limit[b] += self._limit_impulses(data)
                 iterations[b] += int(data.solver_niter[0])
             x_next[b] = self.state(data)
+            # MuJoCo resets a state whose position, velocity or acceleration left the finite
+            # range (|value| > 1e10 or NaN) and says so only by a warning count: such a step is
+            # not the model's, and is flagged
+            converged[b] = self._resets(data) == resets
         self._last = x_next.copy()
+        if not converged.all():
+            warnings.warn(
+                f"MujocoStepper: {int((~converged).sum())} of {B} states diverged (MuJoCo reset "
+                "them: a position, velocity or acceleration beyond 1e10 or not finite); their "
+                "steps are flagged converged = False",
+                MujocoDivergenceWarning,
+                stacklevel=2,
+            )
         step = Step(
-            x_next=x_next, converged=np.ones(B, bool), iterations=iterations, impulse=impulse,
+            x_next=x_next, converged=converged, iterations=iterations, impulse=impulse,
             mu=np.zeros((B, m.ngeom)), dx_dx=dx, dx_du=du, limit_impulse=limit,
         )  # fmt: skip
         return step if batched else step.first()
@@ -230,6 +250,15 @@ class MujocoStepper:
             data.qvel[:] = x[b, self.nq : self.nq + self.nv]
             data.act[:] = x[b, self.nq + self.nv :]
         return rows
+
+    @staticmethod
+    def _resets(data) -> int:
+        """How often MuJoCo has reset ``data`` for a bad position, velocity or acceleration."""
+        import mujoco
+
+        bad = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+               mujoco.mjtWarning.mjWARN_BADQACC)  # fmt: skip
+        return sum(int(data.warning[int(w)].number) for w in bad)
 
     def _contact_impulses(self, data) -> np.ndarray:
         """(ngeom,) normal impulse (N s) on each geom over the MuJoCo step just taken: each

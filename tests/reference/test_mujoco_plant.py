@@ -197,3 +197,20 @@ def test_geom_impulses_are_mujocos_contact_forces(cone):
         np.testing.assert_allclose(step.impulse, expected, rtol=1e-12, atol=1e-15)
         total += expected.sum()
     assert total > 0
+
+
+def test_a_state_mujoco_resets_is_flagged_not_passed_off_as_physics():
+    """MuJoCo silently resets a state whose velocity exceeds 1e10; the step must say it is not
+    the model's (converged False, a warning), and the engine must not use such a rollout."""
+    from drake_abs.reference.mujoco_plant import MujocoDivergenceWarning
+
+    stepper = MujocoStepper.from_gymnasium("Hopper-v5")
+    good = np.concatenate([stepper.model.qpos0, np.zeros(stepper.nv)])
+    bad = good.copy()
+    bad[7] = 1e11  # the root's vertical speed, m/s
+    with pytest.warns(MujocoDivergenceWarning, match="1 of 2 states diverged"):
+        step = stepper.step(np.stack([good, bad]), np.zeros((2, 3)), jacobians=False)
+    np.testing.assert_array_equal(step.converged, [True, False])
+    with pytest.warns(MujocoDivergenceWarning):
+        traj = open_loop(stepper, np.stack([good, bad]), np.zeros((5, 3)), jacobians=False)
+    np.testing.assert_array_equal(traj.used, [True, False])
