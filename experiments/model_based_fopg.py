@@ -29,7 +29,7 @@ on our plant with the file's parameters. Outputs in ``out``: ``summary.json``,
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +44,6 @@ from drake_abs.policy.controls import TimeVaryingController, episode_seed, unifo
 from drake_abs.policy.policies import LinearPolicy
 from drake_abs.policy.saving import save_policy
 from drake_abs.reference.gymnasium_mujoco import reset_states, same_period_frame_skip
-from drake_abs.tasks.adapters import ActionScaled
 from drake_abs.tasks.episodes import episode_statistics, score_episodes
 from drake_abs.tasks.locomotion import TASKS, locomotion_task
 from drake_abs.tasks.locomotion_training import LocomotionTraining, train_method
@@ -132,8 +131,7 @@ def mujoco_episodes(source, task, episodes: int, steps: int, seed: int, controls
 
 def with_model(task, names, theta):
     """The locomotion task with its stepper's learned parameters ``names`` set to ``theta``."""
-    inner = stepper_at(task.stepper.stepper, names, theta)
-    return replace(task, stepper=ActionScaled(inner, task.stepper.scale))
+    return task.with_plant(stepper_at(task.plant, names, theta))
 
 
 def run(config: Config | None = None, out: str | Path | None = None) -> dict:
@@ -150,7 +148,7 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     smoothing = ContactAware(*config.contact_aware)
     base = locomotion_task(config.task, smoothing=smoothing)
     true_task = locomotion_task(config.task)  # exact contact, the file's parameters
-    model = base.stepper.stepper
+    model = base.plant
     names = learned_names(model)
     truth = learned_values(model, names)
     theta_start, scale, lo, hi = perturbed_start(

@@ -21,7 +21,7 @@ from drake_abs.engine.protocols import (
     TimeVaryingPolicy,
     TransitionReward,
 )
-from drake_abs.engine.steppers import LinearStepper, ModelJacobians
+from drake_abs.engine.steppers import LinearStepper, ModelJacobians, ZeroOrderHold
 
 __all__ = [
     "Adjoints",
@@ -34,6 +34,7 @@ __all__ = [
     "TimeVaryingPolicy",
     "Trajectory",
     "TransitionReward",
+    "ZeroOrderHold",
     "open_loop",
     "record",
     "reverse_pass",

@@ -5,11 +5,14 @@
   model-based gradient of gray-box tuning (Zuliani et al. 2025, eq. 8a with J_g = (A, B)), where
   the true
   system is only simulated and its derivatives come from the identified model.
+- :class:`ZeroOrderHold`: another stepper's input held over ``substeps`` of its steps: a
+  controller that acts every ``substeps`` model steps (gymnasium's ``frame_skip``), with the
+  chained Jacobians.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -84,4 +87,77 @@ class ModelJacobians:
             x_next=s.x_next, converged=s.converged, iterations=s.iterations, impulse=s.impulse,
             mu=s.mu, dx_dx=np.broadcast_to(self.A, batch + self.A.shape),
             dx_du=np.broadcast_to(self.B, batch + self.B.shape),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ZeroOrderHold:
+    """``stepper`` with its input held for ``substeps`` of its steps: one call steps a batch
+    over one control period, ``x_{k+1} = f(x_k, u)`` for k = 0 .. substeps - 1 (gymnasium's
+    ``frame_skip``; the control period is ``substeps`` times the inner time step).
+
+    Jacobians by the chain rule over the substeps: ``dx/dx = A_n ... A_1`` and
+    ``dx/du = sum_k A_n ... A_{k+1} B_k`` (and likewise ``dx_dtheta``). What a substep of the
+    record reports is combined over the period: ``converged`` is True only where every substep
+    converged, ``iterations`` and the impulses (N s) are summed, ``mu`` is the largest reached
+    per contact, ``active`` any. The Jacobians of impulses and mu are not chained (None) when
+    ``substeps > 1``; the engine needs only the state's. ``substeps = 1`` is the inner step.
+
+    Args:
+        stepper: the inner :class:`~drake_abs.engine.protocols.Stepper`.
+        substeps: steps per held input, an integer >= 1.
+    """
+
+    stepper: Stepper
+    substeps: int
+
+    def __post_init__(self):
+        if isinstance(self.substeps, bool) or not isinstance(self.substeps, (int, np.integer)):
+            raise ValueError(f"substeps must be an integer >= 1; got {self.substeps!r}")
+        if self.substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1; got {self.substeps!r}")
+        object.__setattr__(self, "substeps", int(self.substeps))
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The inner stepper's model parameters."""
+        return tuple(self.stepper.parameter_names)
+
+    def step(self, x, u, *, jacobians: bool = True, parameters: bool = False, **options) -> Step:
+        """One control period for a batch: x (M, nx), u (M, nu) (or what the inner stepper
+        accepts); ``options`` go to every inner step."""
+        first = self.stepper.step(x, u, jacobians=jacobians, parameters=parameters, **options)
+        if self.substeps == 1:
+            return first
+        s = first
+        Fx, Fu, Fth = s.dx_dx, s.dx_du, s.dx_dtheta
+        converged = np.array(s.converged, dtype=bool)
+        iterations = np.array(s.iterations)
+        sums = {
+            name: np.array(getattr(s, name))
+            for name in ("impulse", "friction_impulse", "limit_impulse")
+            if getattr(s, name) is not None
+        }
+        mu = np.array(s.mu)
+        active = None if s.active is None else np.array(s.active, dtype=bool)
+        for _ in range(self.substeps - 1):
+            s = self.stepper.step(
+                s.x_next, u, jacobians=jacobians, parameters=parameters, **options
+            )
+            converged &= s.converged
+            iterations = iterations + s.iterations
+            for name in sums:
+                sums[name] = sums[name] + getattr(s, name)
+            mu = np.maximum(mu, s.mu)
+            if active is not None:
+                active |= s.active
+            if jacobians:
+                Fx = s.dx_dx @ Fx
+                Fu = s.dx_dx @ Fu + s.dx_du
+            if parameters:
+                Fth = s.dx_dx @ Fth + s.dx_dtheta
+        return replace(
+            s, converged=converged, iterations=iterations, mu=mu, active=active,
+            dx_dx=Fx, dx_du=Fu, dx_dtheta=Fth, dimpulse_dx=None, dimpulse_du=None,
+            dimpulse_dtheta=None, dmu_dx=None, dmu_du=None, dmu_dtheta=None, lcp=None, **sums,
         )  # fmt: skip

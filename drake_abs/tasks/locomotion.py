@@ -19,11 +19,22 @@ the Hopper an unhealthy state ends the episode (``terminated``). Its healthy tes
 inequalities, as gymnasium's ``is_healthy``): every entry of x[2:] in (-100, 100), the height
 q[1] in (0.7, inf), the pitch q[2] in (-0.2, 0.2). The indicator has zero derivative.
 
-**Time step: ours, not gymnasium's.** gymnasium's Hopper steps MuJoCo 4 x 2 ms per action
-(dt = 8 ms) and its HalfCheetah 5 x 10 ms (dt = 50 ms); our scenes take one 10 ms step per
-action, and the forward velocity divides by that dt (0.01 s). A velocity is a velocity, so the
-forward reward per step has the same scale, but an episode of 1000 steps lasts 10 s (gymnasium:
-8 s and 50 s) and the healthy reward per second differs.
+**Control period: gymnasium's.** A task acts once per control period ``dt``, by default
+gymnasium's (``frame_skip`` times the model file's time step: Hopper 4 x 2 ms = 8 ms,
+HalfCheetah 5 x 10 ms = 50 ms), holding the action over ``substeps`` steps of our plant
+(:class:`~drake_abs.engine.steppers.ZeroOrderHold`) of ``dt / substeps`` each; by default as
+few substeps as keep our step at or below the scene's own ``time_step`` (10 ms): one 8 ms step
+for the Hopper, five 10 ms steps for the HalfCheetah. The forward velocity divides by ``dt``, so
+an episode of 1000 actions lasts what gymnasium's does (8 s, 50 s). ``locomotion_task(...,
+control_period=, substeps=)`` trades accuracy for speed (fewer, longer steps).
+
+**Smooth survive term (a training option).** gymnasium's healthy reward is an indicator: its
+derivative is zero, so a first-order method sees no reason to stay up. ``GymLocomotionReward(...,
+smooth_survive=SmoothHealthy(...))`` replaces it, in the reward a method trains on, by a product
+of logistic functions of the height's and the pitch's margins to the healthy ranges (1 deep
+inside, 1/2 at a bound; :class:`SmoothHealthy`; a larger width is a smoother term felt farther
+from the bounds). Termination stays gymnasium's (the indicator), and so does the reward that
+scores a policy.
 
 Observation (gymnasium v5, ``exclude_current_positions_from_observation=True``): q[1:] and v,
 the Hopper's v clipped to [-10, 10] (11 values); the HalfCheetah's unclipped (17 values).
@@ -40,13 +51,14 @@ Building a task (:func:`locomotion_task`) builds the scene's stepper, which need
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 
 from drake_abs._validation import as_count, as_finite_array
 from drake_abs.engine.protocols import Policy
+from drake_abs.engine.steppers import ZeroOrderHold
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.tasks.adapters import ActionScaled, ObservationPolicy
 
@@ -56,6 +68,7 @@ __all__ = [
     "LocomotionObservation",
     "LocomotionTask",
     "ResetNoise",
+    "SmoothHealthy",
     "TASKS",
     "locomotion_task",
 ]
@@ -167,18 +180,65 @@ class HealthyRanges:
 
 
 @dataclass(frozen=True)
+class SmoothHealthy:
+    """A smooth stand-in for :class:`HealthyRanges`' indicator: ``s(x) = prod_b sigma(m_b /
+    w_b)`` over the finite bounds b of the height q[1] (width ``z_width``, m) and the pitch q[2]
+    (``angle_width``, rad), m_b the margin to the bound (positive inside), sigma the logistic
+    function. s is in (0, 1): near 1 deep inside the ranges, 1/2 on a bound. A larger width is
+    smoother (the term pulls from farther away, and less steeply). The state range (every entry
+    of x[2:] in +-100) is left out: it never binds in practice.
+
+    Args:
+        ranges: the healthy ranges it stands in for (default gymnasium's Hopper's).
+        z_width: w of the height's bounds (m), > 0.
+        angle_width: w of the pitch's bounds (rad), > 0.
+    """
+
+    ranges: HealthyRanges = HealthyRanges()
+    z_width: float = 0.05
+    angle_width: float = 0.05
+
+    def __post_init__(self):
+        for name in ("z_width", "angle_width"):
+            w = getattr(self, name)
+            if not (np.isfinite(w) and w > 0):
+                raise ValueError(f"{name} must be a finite number > 0; got {w!r}")
+
+    def value_and_gradient(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """(s (M,), ds/dx (M, nx)) at states x (M, nx), nx >= 3."""
+        x = np.asarray(x, dtype=float)
+        if x.ndim != 2 or x.shape[1] < 3:
+            raise ValueError(f"x must have shape (M, nx) with nx >= 3; got {x.shape}")
+        log_s = np.zeros(x.shape[0])
+        dlog = np.zeros(x.shape)
+        for col, (lo, hi), w in ((1, self.ranges.z, self.z_width),
+                                 (2, self.ranges.angle, self.angle_width)):  # fmt: skip
+            for bound, sign in ((lo, 1.0), (hi, -1.0)):
+                if not np.isfinite(bound):
+                    continue
+                t = sign * (x[:, col] - bound) / w  # the margin, in widths
+                log_s -= np.logaddexp(0.0, -t)  # log sigma(t)
+                dlog[:, col] += sign / w * np.exp(-np.logaddexp(0.0, t))  # sigma(-t) dt/dx
+        s = np.exp(log_s)
+        return s, s[:, None] * dlog
+
+
+@dataclass(frozen=True)
 class GymLocomotionReward:
     """gymnasium v5's locomotion reward of a transition, batched, with its derivatives (a
     :class:`~drake_abs.engine.protocols.TransitionReward`; the module docstring has the formula).
 
     Args:
         nq, nv, nu: sizes of q, v and the action.
-        dt: the time step (s) the forward velocity divides by: the scene's.
+        dt: the control period (s) the forward velocity divides by: the task's.
         forward_reward_weight: w_f (reward per m/s).
         ctrl_cost_weight: w_c (per unit of action squared).
         healthy_reward: h, per step ending healthy (0 and ``healthy=None``: no healthy term).
         healthy: the healthy test (:class:`HealthyRanges`) or None.
         terminate_when_unhealthy: ``terminated(x_next)`` is True where x_next is not healthy.
+        smooth_survive: a training option: the healthy reward is ``h * s(x_next)``
+            (:class:`SmoothHealthy`, with a derivative) instead of the indicator's; needs
+            ``healthy``. Termination is unchanged. None (default): gymnasium's reward.
 
     :meth:`hopper` and :meth:`half_cheetah` give gymnasium v5's defaults.
     """
@@ -192,6 +252,7 @@ class GymLocomotionReward:
     healthy_reward: float = 0.0
     healthy: HealthyRanges | None = None
     terminate_when_unhealthy: bool = False
+    smooth_survive: SmoothHealthy | None = None
 
     def __post_init__(self):
         for name in ("nq", "nv", "nu"):
@@ -205,6 +266,13 @@ class GymLocomotionReward:
             raise ValueError(
                 "healthy_reward and terminate_when_unhealthy need healthy (the HealthyRanges)"
             )
+        if self.smooth_survive is not None:
+            if self.healthy is None:
+                raise ValueError("smooth_survive needs healthy (the HealthyRanges it smooths)")
+            if not isinstance(self.smooth_survive, SmoothHealthy):
+                raise ValueError(
+                    f"smooth_survive must be a SmoothHealthy or None; got {self.smooth_survive!r}"
+                )
 
     @classmethod
     def hopper(cls, dt: float, **overrides) -> GymLocomotionReward:
@@ -246,7 +314,8 @@ class GymLocomotionReward:
     def terms(self, x, u, x_next) -> dict[str, np.ndarray]:
         """The reward's terms under gymnasium's ``info`` names, each (M,): ``x_velocity``
         (m/s), ``reward_forward``, ``reward_ctrl`` (minus the control cost) and, with a healthy
-        test, ``reward_survive``. The reward is the sum of the ``reward_*`` terms."""
+        test, ``reward_survive`` (the smooth term's value with ``smooth_survive``). The reward is
+        the sum of the ``reward_*`` terms."""
         x, u, x_next = self._check(x, u, x_next)
         velocity = (x_next[:, 0] - x[:, 0]) / self.dt
         out = {
@@ -254,7 +323,10 @@ class GymLocomotionReward:
             "reward_forward": self.forward_reward_weight * velocity,
             "reward_ctrl": -self.ctrl_cost_weight * np.sum(u * u, axis=1),
         }
-        if self.healthy is not None:
+        if self.smooth_survive is not None:
+            smooth, _ = self.smooth_survive.value_and_gradient(x_next)
+            out["reward_survive"] = self.healthy_reward * smooth
+        elif self.healthy is not None:
             out["reward_survive"] = self.healthy_reward * self.is_healthy(x_next)
         return out
 
@@ -268,6 +340,9 @@ class GymLocomotionReward:
         dr_dx[:, 0] = -self.forward_reward_weight / self.dt
         dr_dxn[:, 0] = self.forward_reward_weight / self.dt
         dr_du = -2.0 * self.ctrl_cost_weight * np.asarray(u, dtype=float)
+        if self.smooth_survive is not None:
+            _, ds = self.smooth_survive.value_and_gradient(x_next)
+            dr_dxn += self.healthy_reward * ds
         return r, dr_dx, dr_du, dr_dxn
 
     def terminal(self, x) -> tuple[np.ndarray, np.ndarray]:
@@ -327,13 +402,15 @@ class LocomotionTask:
 
     Attributes:
         name: the task's name (``"hopper"``, ``"half_cheetah"`` or your own).
-        stepper: the scene's stepper taking actions in [-1, 1]
-            (:class:`~drake_abs.tasks.adapters.ActionScaled`).
+        stepper: one control period of the scene's plant, taking actions in [-1, 1]:
+            ``ActionScaled(ZeroOrderHold(plant, substeps), gears)``
+            (:class:`~drake_abs.tasks.adapters.ActionScaled`,
+            :class:`~drake_abs.engine.steppers.ZeroOrderHold`).
         reward: a transition reward (:class:`GymLocomotionReward`).
         observation: the observation map (:class:`LocomotionObservation`).
         x0: (nx,) the scene's initial state (gymnasium's ``init_qpos``, ``init_qvel``).
         reset_noise: gymnasium's reset noise around x0.
-        dt: the time step of one action (s): the scene's.
+        dt: the control period (s): one action lasts ``dt``, ``substeps`` plant steps.
         env_id: the gymnasium environment this task reproduces (``"Hopper-v5"``), if any.
         report_z: ``info`` has gymnasium Hopper's ``z_distance_from_origin``.
     """
@@ -349,6 +426,13 @@ class LocomotionTask:
     report_z: bool = False
 
     def __post_init__(self):
+        if not isinstance(self.stepper, ActionScaled) or not isinstance(
+            self.stepper.stepper, ZeroOrderHold
+        ):
+            raise ValueError(
+                "stepper must be ActionScaled(ZeroOrderHold(plant, substeps), gears); got "
+                f"{self.stepper!r}"
+            )
         x0 = as_finite_array(self.x0, "x0", ndim=(1,))
         if x0.size != self.observation.nx or self.reward.nx != self.observation.nx:
             raise ValueError(
@@ -356,6 +440,21 @@ class LocomotionTask:
                 f"({self.observation.nx}) must agree on nx"
             )
         object.__setattr__(self, "x0", x0)
+
+    @property
+    def plant(self):
+        """The scene's stepper (one plant step of ``dt / substeps``, joint torques as input)."""
+        return self.stepper.stepper.stepper
+
+    @property
+    def substeps(self) -> int:
+        """Plant steps per action."""
+        return self.stepper.stepper.substeps
+
+    def with_plant(self, plant) -> LocomotionTask:
+        """This task on another plant stepper (same substeps, gears, reward and observation)."""
+        hold = ZeroOrderHold(plant, self.substeps)
+        return replace(self, stepper=ActionScaled(hold, self.stepper.scale))
 
     @property
     def nq(self) -> int:
@@ -418,11 +517,14 @@ class _TaskSpec:
     velocity_clip: float | None
     reset_noise: ResetNoise
     report_z: bool
+    control_period: float  # gymnasium's: frame_skip x the model file's timestep (s)
 
 
 #: The tasks :func:`locomotion_task` builds, by name: scene, gymnasium id, v5 settings.
 TASKS: dict[str, _TaskSpec] = {
-    "hopper": _TaskSpec("gym_hopper", "Hopper-v5", "hopper", 10.0, ResetNoise(5e-3), True),
+    "hopper": _TaskSpec(
+        "gym_hopper", "Hopper-v5", "hopper", 10.0, ResetNoise(5e-3), True, 4 * 0.002
+    ),
     "half_cheetah": _TaskSpec(
         "gym_half_cheetah",
         "HalfCheetah-v5",
@@ -430,39 +532,59 @@ TASKS: dict[str, _TaskSpec] = {
         None,
         ResetNoise(0.1, "normal"),
         False,
+        5 * 0.01,
     ),  # fmt: skip
 }
 
 
 def locomotion_task(
-    name: Literal["hopper", "half_cheetah"], *, smoothing=None, reward_options=None, **stepper
+    name: Literal["hopper", "half_cheetah"],
+    *,
+    smoothing=None,
+    reward_options=None,
+    control_period: float | None = None,
+    substeps: int | None = None,
+    **stepper,
 ) -> LocomotionTask:
     """gymnasium's ``Hopper-v5`` or ``HalfCheetah-v5`` on our plant (builds the scene; needs
     Drake).
 
     Args:
         name: ``"hopper"`` or ``"half_cheetah"``.
-        smoothing: the contact smoothing (default: the scene's, exact contact).
-        reward_options: replace gymnasium's reward settings (``ctrl_cost_weight``, ...; see
-            :class:`GymLocomotionReward`).
+        smoothing: the contact smoothing (default: the scene's, exact contact), used as given at
+            the plant's step ``control_period / substeps``.
+        reward_options: replace gymnasium's reward settings (``ctrl_cost_weight``,
+            ``smooth_survive``, ...; see :class:`GymLocomotionReward`).
+        control_period: seconds per action (default gymnasium's: 8 ms Hopper, 50 ms
+            HalfCheetah).
+        substeps: plant steps per action (default: the fewest that keep the plant's step at or
+            below the scene's ``time_step``). More substeps: more accurate, slower.
         stepper: other settings of the scene's stepper
             (:meth:`drake_abs.multibody.builder.SceneModel.stepper`).
     """
     if name not in TASKS:
         raise ValueError(f"name must be one of {sorted(TASKS)}; got {name!r}")
     from drake_abs.multibody.builder import build_scene_model  # Drake, only when building
+    from drake_abs.multibody.scene import Scene
 
     spec = TASKS[name]
-    model = build_scene_model(spec.scene)
+    scene = Scene.load(spec.scene)
+    dt = spec.control_period if control_period is None else control_period
+    if not (isinstance(dt, (int, float, np.floating)) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"control_period must be a finite number > 0 (s); got {dt!r}")
+    dt = float(dt)
+    if substeps is None:
+        substeps = max(1, int(np.ceil(dt / scene.time_step - 1e-9)))
+    substeps = as_count(substeps, "substeps", minimum=1)
+    model = build_scene_model(replace(scene, time_step=dt / substeps))
     gears = np.array([a["gear"] for a in model.model_report()["actuators"]], dtype=float)
     inner = model.stepper(smoothing=smoothing, **stepper)
-    dt = float(model.scene.time_step)
     reward = getattr(GymLocomotionReward, spec.reward)(dt, **(reward_options or {}))
     nq, nv, nu = inner.sizes[:3]
     if (nq, nv, nu) != (reward.nq, reward.nv, reward.nu):
         raise RuntimeError(f"scene {spec.scene!r} has sizes {(nq, nv, nu)}, not gymnasium's")
     return LocomotionTask(
-        name=name, stepper=ActionScaled(inner, gears), reward=reward,
+        name=name, stepper=ActionScaled(ZeroOrderHold(inner, substeps), gears), reward=reward,
         observation=LocomotionObservation(nq, nv, spec.velocity_clip), x0=model.x0,
         reset_noise=spec.reset_noise, dt=dt, env_id=spec.env_id, report_z=spec.report_z,
     )  # fmt: skip

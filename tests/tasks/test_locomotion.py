@@ -98,7 +98,7 @@ def test_one_transitions_reward_is_gymnasiums_formula(name, tasks, gym_envs, rng
         for key, value in want_info.items():
             assert info[key][m] == pytest.approx(value, rel=1e-12, abs=1e-12), key
         assert info["x_velocity"][m] == pytest.approx(velocity, rel=1e-12)
-    assert task.dt == 0.01  # the scene's time step, not gymnasium's frame_skip * timestep
+    assert task.dt == env.dt  # gymnasium's control period: frame_skip * timestep
 
 
 def test_hopper_termination_and_healthy_reward_are_gymnasiums(tasks, gym_envs, rng):
@@ -154,7 +154,7 @@ def test_gears_and_control_range_are_mujocos(name, tasks, gym_envs):
     np.testing.assert_array_equal(task.stepper.scale, env.model.actuator_gear[:, 0])
     np.testing.assert_array_equal(env.model.actuator_ctrlrange, np.tile([-1.0, 1.0], (task.nu, 1)))
     # the scene's stepper clips torque at gear * 1: gymnasium's ctrl clip to [-1, 1]
-    np.testing.assert_array_equal(task.stepper.stepper.effort, task.stepper.scale)
+    np.testing.assert_array_equal(task.plant.effort, task.stepper.scale)
     env_space = DrakeAbsEnv(task).action_space
     assert env_space == env.action_space
 
@@ -370,3 +370,46 @@ def test_objective_rollout_gradient_matches_central_differences(tasks, rng):
     states = task.initial_states(rng, 3)  # gymnasium's noisy starts, one per rollout
     noisy = rollout(task.stepper, objective.policy, theta, states, noise, task.reward, sigma=0.3)
     assert np.all(np.isfinite(noisy.returns)) and np.all(np.isfinite(noisy.grad))
+
+
+def test_smooth_survive_term_is_a_differentiable_stand_in_for_the_indicator(rng):
+    from drake_abs.tasks.locomotion import SmoothHealthy
+
+    smooth = SmoothHealthy(z_width=0.05, angle_width=0.02)
+    x = np.zeros((4, 12))
+    x[:, 1] = [1.25, 0.7, 1.25, 0.9]  # deep inside, on the height bound, ...
+    x[:, 2] = [0.0, 0.0, 0.2, 0.1]  # ..., on the pitch bound, near it
+    s, ds = smooth.value_and_gradient(x)
+    assert s[0] > 0.99 and s[1] == pytest.approx(0.5, abs=1e-3) and s[2] == pytest.approx(0.5, 1e-3)
+    assert 0.5 < s[3] < s[0]
+    for m in range(4):
+        fd = central_difference(lambda z: smooth.value_and_gradient(z[None])[0], x[m], 1e-7)
+        np.testing.assert_allclose(ds[m], fd[0], rtol=1e-6, atol=1e-9)
+    assert (ds[:, 3:] == 0).all()  # only the height and the pitch
+    wide = SmoothHealthy(z_width=0.2, angle_width=0.2).value_and_gradient(x[3:])[0]
+    assert wide[0] < s[3]  # a wider (smoother) term is felt farther inside the ranges
+    with pytest.raises(ValueError, match="z_width must be a finite number > 0"):
+        SmoothHealthy(z_width=0.0)
+
+
+def test_smooth_survive_reward_has_its_gradient_and_keeps_gymnasiums_termination(rng):
+    from drake_abs.tasks.locomotion import SmoothHealthy
+
+    smooth = GymLocomotionReward.hopper(0.008, smooth_survive=SmoothHealthy())
+    plain = GymLocomotionReward.hopper(0.008)
+    x = np.tile(np.r_[0.0, 1.25, 0.0, np.zeros(9)], (3, 1)) + 0.01 * rng.standard_normal((3, 12))
+    xn = x.copy()
+    xn[:, 1] = [1.25, 0.71, 0.69]
+    xn[:, 2] = [0.19, 0.0, 0.0]
+    u = rng.standard_normal((3, 3))
+    r, dx, du, dxn = smooth.transition(x, u, xn)
+    for m in range(3):
+        xm, um = x[m : m + 1], u[m : m + 1]
+        fd = central_difference(lambda z, xm=xm, um=um: smooth.transition(xm, um, z[None])[0],
+                                xn[m], 1e-7)  # fmt: skip
+        np.testing.assert_allclose(dxn[m], fd[0], rtol=1e-6, atol=1e-8)
+    np.testing.assert_array_equal(smooth.terminated(xn), plain.terminated(xn))
+    assert smooth.terminated(xn).tolist() == [False, False, True]
+    assert (r < plain.transition(x, u, xn)[0])[:2].all()  # near a bound: less than the full bonus
+    with pytest.raises(ValueError, match="smooth_survive needs healthy"):
+        GymLocomotionReward.half_cheetah(0.05, smooth_survive=SmoothHealthy())
