@@ -87,12 +87,14 @@ def test_every_number_is_finite_and_every_setting_reported(summary):
 
 def test_control_periods_are_read_from_the_models(summary):
     hop, cheetah = (summary["tasks"][n]["settings"] for n in ("hopper", "half_cheetah"))
-    assert hop["ours"]["control_period"] == cheetah["ours"]["control_period"] == 0.01
-    assert (hop["mujoco_default"]["frame_skip"], hop["mujoco_same_dt"]["frame_skip"]) == (4, 5)
+    # our tasks act at gymnasium's control periods, so the same-period MuJoCo run is its default
+    assert hop["ours"]["control_period"] == pytest.approx(0.008)
+    assert cheetah["ours"]["control_period"] == pytest.approx(0.05)
+    assert (hop["mujoco_default"]["frame_skip"], hop["mujoco_same_dt"]["frame_skip"]) == (4, 4)
     assert (cheetah["mujoco_default"]["frame_skip"], cheetah["mujoco_same_dt"]["frame_skip"]) == (
-        5, 1,
+        5, 5,
     )  # fmt: skip
-    assert hop["mujoco_same_dt"]["control_period"] == pytest.approx(0.01)
+    assert hop["mujoco_same_dt"]["control_period"] == pytest.approx(0.008)
     assert hop["mujoco_default"]["control_period"] == pytest.approx(0.008)
     assert cheetah["mujoco_default"]["control_period"] == pytest.approx(0.05)
     with pytest.raises(ValueError, match="not a whole multiple"):
