@@ -9,12 +9,16 @@ Usage::
     drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
                     [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
     drake-abs record SCENE [--steps N] [--out FILE]
-    drake-abs replay POLICY.json [--steps N] [--seed S] [--out FILE]
+    drake-abs replay POLICY.json|POLICY.npz [--env ID] [--steps N] [--seed S] [--out FILE]
+    drake-abs evaluate POLICY.npz [--env ID] [--seeds N] [--max-steps N] [--json FILE]
+                       [--no-plant]
     drake-abs list
     drake-abs precompile
     drake-abs --version
 
 Names are shown with dashes (gradient-variance, box-push); underscores are accepted too.
+POLICY.npz is a policy file of the published format (drake_abs.policy.policy_files;
+docs/policy_files.md); POLICY.json a policy saved by drake_abs.policy.saving.
 """
 
 from __future__ import annotations
@@ -262,14 +266,19 @@ def _record(scene, steps: int, out: str | None) -> int:
 
 
 def policy_argument(text: str) -> str:
-    """An argparse type: a saved policy, its STEM.json (or STEM.npz, or STEM), as the JSON's
-    absolute path."""
+    """An argparse type: a policy file (``.npz`` of the published format, as its absolute
+    path), or a saved policy, its STEM.json (or STEM.npz, or STEM), as the JSON's absolute
+    path."""
+    from drake_abs.policy.policy_files import is_policy_file
     from drake_abs.policy.saving import policy_paths
 
+    if is_policy_file(text):
+        return str(Path(text).expanduser().resolve())
     json_path, _ = policy_paths(text)
     if not json_path.is_file():
         raise argparse.ArgumentTypeError(
-            f"no saved policy {text!r}: give the STEM.json that save_policy wrote"
+            f"no saved policy or policy file {text!r}: give a policy file (.npz with W, b or "
+            "W0, b0, ...) or the STEM.json that save_policy wrote"
         )
     return str(json_path.resolve())
 
@@ -280,7 +289,7 @@ policy_argument.__name__ = "saved policy"
 def _replay(saved, steps: int | None, seed: int, out: str | None) -> int:
     from drake_abs.diagrams.policy_replay import replay_policy_html
 
-    stem = Path(saved.path).name.removesuffix(".json")
+    stem = Path(saved.path).name.removesuffix(".json").removesuffix(".npz")
     html = Path(out or f"results/{stem}.html").expanduser().resolve()
     replay = replay_policy_html(saved, html, steps=steps, seed=seed)
     ep = replay.episode
@@ -288,6 +297,133 @@ def _replay(saved, steps: int | None, seed: int, out: str | None) -> int:
     print(f"replayed {stem} ({replay.task_name}, seed {seed}) on our plant: {ep.steps} steps "
           f"({ep.seconds:g} s, {ended}), return {ep.total_return:.2f}, forward "
           f"{ep.forward_distance:+.3f} m (Meshcat, localhost) to {replay.path}")  # fmt: skip
+    return 0
+
+
+def _plant_score(file, env_id: str, seeds: list[int], max_steps: int) -> dict:
+    """The policy file's score on our plant, or ``{"skipped": why}`` where the environment has
+    no scene on our plant or our task observes something else than gymnasium (checked on the
+    reset observations of the same seeds)."""
+    import numpy as np
+
+    from drake_abs.reference.gym_scoring import reset_observations
+    from drake_abs.tasks.locomotion import locomotion_task
+    from drake_abs.tasks.published_policies import score_on_plant, task_name_for_env
+    from drake_abs.tasks.saved_policies import reset_state
+
+    try:
+        name = task_name_for_env(env_id)
+    except ValueError as err:
+        return {"skipped": str(err)}
+    task = locomotion_task(name)
+    ours = task.observation(np.array([reset_state(task, s) for s in seeds]))
+    theirs = reset_observations(env_id, seeds)
+    if ours.shape != theirs.shape or not np.allclose(ours, theirs, rtol=0, atol=1e-12):
+        return {"skipped": f"task {name!r} does not observe what {env_id} observes (its reset "
+                           "observations differ from gymnasium's)"}  # fmt: skip
+    return score_on_plant(task, file, seeds=seeds, max_steps=max_steps)
+
+
+def _score_row(label: str, score: dict) -> str:
+    lengths = score["lengths"]
+    return (
+        f"  {label:15s}{score['mean']:11.2f}{score['std']:10.2f}{score['min']:11.2f}"
+        f"{score['max']:11.2f}   {score['length_mean']:7.1f}  {min(lengths)}..{max(lengths)}"
+    )
+
+
+def evaluation_report(result: dict) -> str:
+    """The plain-text report of ``drake-abs evaluate`` from its JSON record."""
+    seeds = result["seeds"]
+    span = f"{seeds[0]}..{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else (
+        ", ".join(str(s) for s in seeds))  # fmt: skip
+    meta = result["metadata"]
+    about = ", ".join(f"{k} {meta[k]}" for k in ("method", "seed", "training_steps") if k in meta)
+    mj = result["mujoco"]
+    header = (f"  {'':15s}{'mean':>11s}{'std':>10s}{'min':>11s}{'max':>11s}   steps (mean, "
+              "min..max)")  # fmt: skip
+    lines = [
+        f"policy {result['policy']}",
+        f"  {result['description']}" + (f" ({about})" if about else ""),
+        "",
+        f"{result['env_id']} in MuJoCo (gymnasium {mj['policy']['gymnasium']}, mujoco "
+        f"{mj['policy']['mujoco']}, the environment's defaults), {len(seeds)} episodes from "
+        f"reset seeds {span}, at most {result['max_steps']} steps, actions clipped to the "
+        "action space:",
+        header,
+        _score_row("policy", mj["policy"]),
+        _score_row("zero action", mj["zero"]),
+        _score_row("random action", mj["random"]),
+        "  (random action: uniform in the action space from numpy.random.default_rng(seed))",
+        "",
+    ]
+    plant = result["plant"]
+    if plant is None:
+        lines.append("our plant: not scored (--no-plant)")
+    elif "skipped" in plant:
+        lines.append(f"our plant: not scored: {plant['skipped']}")
+    else:
+        lines += [
+            f"our plant (task {plant['task']}, {plant['dt']:g} s per action), the same reset "
+            "seeds and steps:",
+            header,
+            _score_row("policy", plant),
+            f"  episodes with an unconverged contact solve: {plant['unconverged_episodes']} of "
+            f"{len(plant['returns'])} ({plant['unconverged_steps']} steps)",
+        ]
+    return "\n".join(lines)
+
+
+def _evaluate(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """The evaluate subcommand: the policy file's score in MuJoCo's own environment with the
+    floors beside it, and on our plant; the JSON record to ``--json``."""
+    import json
+
+    from drake_abs.policy.policy_files import load_policy_file
+    from drake_abs.reference.gym_scoring import floors, score_policy
+
+    try:
+        file = load_policy_file(args.policy)
+    except (ValueError, OSError) as err:
+        sub.error(f"argument POLICY: {err}")
+    named = file.metadata.get("env_id")
+    env_id = args.env or named
+    if env_id is None:
+        sub.error("argument --env: the policy file names no env_id; give the gymnasium "
+                  "environment, e.g. --env Hopper-v5")  # fmt: skip
+    if args.env and named and args.env != named:
+        print(f"note: the policy file was written for {named}; scoring it in {args.env}",
+              file=sys.stderr)  # fmt: skip
+    env_id = str(env_id)
+    try:
+        import gymnasium
+
+        env = gymnasium.make(env_id)
+    except ImportError as err:
+        sub.error(f"argument --env: gymnasium and mujoco are needed ({err})")
+    except Exception as err:  # gymnasium's unknown-id and missing-dependency errors
+        sub.error(f"argument --env: {env_id!r}: {err}")
+    obs_shape, action_shape = env.observation_space.shape, env.action_space.shape
+    env.close()
+    if obs_shape != (file.n_obs,) or action_shape != (file.nu,):
+        sub.error(
+            f"argument POLICY: the policy maps {file.n_obs} observations to {file.nu} actions; "
+            f"{env_id} observes {obs_shape} and acts with {action_shape}"
+        )
+    seeds, steps = list(range(args.seeds)), args.max_steps
+    result = {
+        "policy": args.policy, "description": file.describe(), "metadata": dict(file.metadata),
+        "env_id": env_id, "seeds": seeds, "max_steps": steps,
+        "mujoco": {"policy": score_policy(file.output, env_id, seeds=seeds, max_steps=steps),
+                   **floors(env_id, seeds, steps)},
+        "plant": None if args.no_plant else _plant_score(file, env_id, seeds, steps),
+    }  # fmt: skip
+    print(evaluation_report(result))
+    if args.json is not None:
+        path = Path(args.json).expanduser().resolve()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=1) + "\n")
+        print(f"written to {path}")
     return 0
 
 
@@ -388,8 +524,14 @@ def build_parser() -> argparse.ArgumentParser:
         "policy",
         type=policy_argument,
         metavar="POLICY",
-        help="the saved policy's JSON file (STEM.json, beside its STEM.npz)",
+        help="a policy file (.npz: W, b or W0, b0, ..., obs_mean, obs_std) or a saved policy's "
+        "JSON file (STEM.json, beside its STEM.npz)",
     )
+    rep.add_argument(
+        "--env", default=None, metavar="ID",
+        help="a policy file's gymnasium environment, e.g. Hopper-v5 (default: the file's "
+        "env_id)",
+    )  # fmt: skip
     rep.add_argument(
         "--steps",
         type=positive_int("--steps", "1000"),
@@ -408,6 +550,34 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument(
         "--out", default=None, metavar="FILE", help="HTML file (default: results/STEM.html)"
     )
+    ev = sub.add_parser(
+        "evaluate",
+        help="score a policy file in MuJoCo's own gymnasium environment and on our plant",
+        description="Score a policy file (.npz: W, b or W0, b0, ..., obs_mean, obs_std) in "
+        "MuJoCo's own gymnasium environment at its defaults (gymnasium.make(ID)), one episode "
+        "per reset seed 0 .. N-1, actions clipped to the action space, with the zero-action "
+        "and random-action floors over the same seeds beside it; then on our plant (the task "
+        "that models the environment, from the same reset states), where there is one.",
+    )
+    ev.add_argument(
+        "policy", metavar="POLICY.npz",
+        help="the policy file (docs/policy_files.md says what it holds)",
+    )  # fmt: skip
+    ev.add_argument(
+        "--env", default=None, metavar="ID",
+        help="the gymnasium environment, e.g. Hopper-v5 (default: the file's env_id)",
+    )  # fmt: skip
+    ev.add_argument(
+        "--seeds", type=positive_int("--seeds", "10"), default=10, metavar="N",
+        help="episodes, from reset seeds 0 .. N-1 (default: %(default)s)",
+    )  # fmt: skip
+    ev.add_argument(
+        "--max-steps", type=positive_int("--max-steps", "1000"), default=1000, metavar="N",
+        help="the most steps of an episode (default: %(default)s, the environments' own limit; "
+        "fewer only for quick checks)",
+    )  # fmt: skip
+    ev.add_argument("--json", default=None, metavar="FILE", help="also write the record here")
+    ev.add_argument("--no-plant", action="store_true", help="score in MuJoCo only")
     sweep = sub.add_parser(
         "sweep",
         help="run an experiment over seeds and settings, here or on a Ray cluster",
@@ -450,6 +620,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.subcommands = {
         "demo": demo, "experiment": exp, "record": rec, "replay": rep, "sweep": sweep,
+        "evaluate": ev,
     }  # fmt: skip
 
     sub.add_parser(
@@ -493,13 +664,23 @@ def main(argv: list[str] | None = None) -> int:
         except (ValueError, OSError) as err:  # a malformed or unreadable scene file
             sub.error(f"argument SCENE: {err}")
         return _record(scene, args.steps, args.out)
+    if args.command == "evaluate":
+        if args.json is not None and Path(args.json).expanduser().is_dir():
+            sub.error(f"argument --json: {args.json!r} is a folder; give a file name")
+        return _evaluate(sub, args)
     if args.command == "replay":
         if args.out is not None and Path(args.out).expanduser().is_dir():
             sub.error(f"argument --out: {args.out!r} is a folder; give an HTML file name")
+        from drake_abs.tasks.published_policies import load_for_task
         from drake_abs.tasks.saved_policies import load_policy
 
+        is_file = args.policy.endswith(".npz")
+        if args.env is not None and not is_file:
+            sub.error("argument --env: applies to a policy file (.npz); a saved policy "
+                      "(STEM.json) names its task")  # fmt: skip
         try:
-            saved = load_policy(args.policy)
+            saved = load_for_task(args.policy, env_id=args.env) if is_file else (
+                load_policy(args.policy))  # fmt: skip
         except (ValueError, OSError) as err:  # not a policy, an unknown kind, a missing npz
             sub.error(f"argument POLICY: {err}")
         if saved.task is None:

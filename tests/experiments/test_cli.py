@@ -10,12 +10,14 @@ import inspect
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from drake_abs.experiments import cli, outputs
 from drake_abs.experiments.catalog import EXPERIMENTS, STANDARD_EXPERIMENTS
 from drake_abs.experiments.cli import build_parser, main
 from drake_abs.multibody.scene import shipped_scenes
+from drake_abs.policy.policy_files import PolicyFile
 
 MARKUP = ("`", "**", ":func:", ":class:", ":mod:", ":data:", ":meth:")
 
@@ -160,7 +162,7 @@ def _help(argv) -> None:
 
 
 @pytest.mark.parametrize("argv", [[], ["demo"], ["experiment"], ["record"], ["list"],
-                                  ["precompile"]])  # fmt: skip
+                                  ["precompile"], ["evaluate"], ["replay"]])  # fmt: skip
 def test_help_is_plain_text(argv, capsys):
     _help(argv)
     text = capsys.readouterr().out
@@ -198,3 +200,107 @@ def test_cli_runs_an_experiment_and_prints_the_absolute_folder(tmp_path, monkeyp
     summary = json.loads((folder / "summary.json").read_text())
     assert all(Path(p).is_absolute() for p in summary["files"].values())
     assert not outputs.progress_enabled()  # --no-progress
+
+
+# ------------------------------------------------------------------ policy files: evaluate, replay
+
+
+def _policy_file(tmp_path, name: str = "hop.npz", scale: float = 0.2, **metadata) -> Path:
+    W = scale * np.random.default_rng(5).standard_normal((3, 11))
+    return PolicyFile.linear(W, np.zeros(3), **metadata).save(tmp_path / name)
+
+
+def test_evaluate_scores_a_policy_file_in_mujoco_and_on_our_plant(tmp_path, capsys):
+    pytest.importorskip("gymnasium")
+    pytest.importorskip("mujoco")
+    path = _policy_file(tmp_path, env_id="Hopper-v5", method="fopg_abs", seed=2)
+    record = tmp_path / "out" / "eval.json"
+    argv = ["evaluate", str(path), "--seeds", "2", "--max-steps", "15", "--json", str(record)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    for text in ("Hopper-v5 in MuJoCo", "reset seeds 0..1, at most 15 steps", "zero action",
+                 "random action", "our plant (task hopper", "method fopg_abs, seed 2",
+                 "episodes with an unconverged contact solve: 0 of 2"):  # fmt: skip
+        assert text in out, text
+    result = json.loads(record.read_text())
+    mujoco = result["mujoco"]
+    assert result["seeds"] == [0, 1] and result["env_id"] == "Hopper-v5"
+    assert set(mujoco) == {"policy", "zero", "random"}
+    assert all(len(mujoco[k]["returns"]) == 2 for k in mujoco)
+    assert len(result["plant"]["returns"]) == 2 and result["plant"]["task"] == "hopper"
+    # the printed rows are the record's
+    rows = [ln.split() for ln in out.splitlines() if ln.startswith("  policy ")]
+    assert [float(r[1]) for r in rows] == [round(mujoco["policy"]["mean"], 2),
+                                           round(result["plant"]["mean"], 2)]  # fmt: skip
+
+
+def test_evaluate_of_a_zero_file_prints_the_zero_floor(tmp_path, capsys):
+    pytest.importorskip("gymnasium")
+    path = _policy_file(tmp_path, "zero.npz", scale=0.0)
+    record = tmp_path / "zero.json"
+    argv = ["evaluate", str(path), "--env", "HalfCheetah-v5", "--seeds", "2", "--max-steps", "10",
+            "--json", str(record), "--no-plant"]  # fmt: skip
+    # an 11-observation file does not fit HalfCheetah-v5 (17): a usage error
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    assert "the policy maps 11 observations to 3 actions" in capsys.readouterr().err
+    argv[3] = "Hopper-v5"
+    assert main(argv) == 0
+    result = json.loads(record.read_text())
+    assert result["mujoco"]["policy"]["returns"] == result["mujoco"]["zero"]["returns"]
+    assert result["plant"] is None
+    assert "our plant: not scored (--no-plant)" in capsys.readouterr().out
+
+
+def test_evaluate_refuses_bad_files_and_environments(tmp_path, capsys):
+    pytest.importorskip("gymnasium")
+    bare = _policy_file(tmp_path, "bare.npz")
+    broken = tmp_path / "broken.npz"
+    with broken.open("wb") as handle:
+        np.savez(handle, W=np.zeros((3, 11)), b=np.zeros(3))  # no obs_mean, obs_std
+    bad = [
+        ([str(bare)], "argument --env: the policy file names no env_id"),
+        ([str(broken), "--env", "Hopper-v5"], "argument POLICY:"),
+        ([str(tmp_path / "missing.npz"), "--env", "Hopper-v5"], "argument POLICY: no policy file"),
+        ([str(bare), "--env", "NoSuchEnv-v9"], "argument --env: 'NoSuchEnv-v9'"),
+        ([str(bare), "--env", "Hopper-v5", "--seeds", "0"], "argument --seeds:"),
+        ([str(bare), "--env", "Hopper-v5", "--json", str(tmp_path)], "argument --json:"),
+    ]
+    for argv, message in bad:
+        with pytest.raises(SystemExit) as exit_:
+            main(["evaluate", *argv])
+        assert exit_.value.code == 2, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
+    with pytest.raises(SystemExit):
+        main(["evaluate", str(broken), "--env", "Hopper-v5"])
+    assert "no 'obs_mean'" in capsys.readouterr().err
+
+
+def test_evaluate_says_where_there_is_no_scene_on_our_plant(tmp_path, capsys):
+    pytest.importorskip("gymnasium")
+    path = PolicyFile.linear(np.zeros((1, 4)), np.zeros(1)).save(tmp_path / "pendulum.npz")
+    assert main(["evaluate", str(path), "--env", "InvertedPendulum-v5", "--seeds", "1",
+                 "--max-steps", "5"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "our plant: not scored: env_id 'InvertedPendulum-v5' has no scene on our plant" in out
+
+
+def test_replay_draws_a_policy_file_on_our_plant(tmp_path, capsys):
+    path = _policy_file(tmp_path, env_id="Hopper-v5")
+    html = tmp_path / "hop.html"
+    assert main(["replay", str(path), "--steps", "5", "--out", str(html)]) == 0
+    out = capsys.readouterr().out
+    assert "replayed hop (hopper, seed 0)" in out and "5 steps" in out
+    assert html.is_file() and html.stat().st_size > 10_000
+    bare = _policy_file(tmp_path, "bare.npz")
+    bad = [([str(bare)], "argument POLICY: the policy file"),
+           ([str(bare), "--env", "InvertedPendulum-v5"], "has no scene on our plant")]  # fmt: skip
+    for argv, message in bad:
+        with pytest.raises(SystemExit) as exit_:
+            main(["replay", *argv, "--steps", "3", "--out", str(tmp_path / "x.html")])
+        assert exit_.value.code == 2
+        assert message in capsys.readouterr().err
+    assert main(["replay", str(bare), "--env", "Hopper-v5", "--steps", "3", "--out",
+                 str(tmp_path / "bare.html")]) == 0  # fmt: skip
