@@ -28,7 +28,7 @@ from pydrake.multibody.tree import (
 )
 
 from drake_abs.contact.cone import FrictionCone
-from drake_abs.contact.damping import implicit_damping
+from drake_abs.contact.damping import JointSprings, implicit_damping
 from drake_abs.contact.step_data import StepQuantities
 from drake_abs.multibody.affine_dynamics import AffineDynamics
 from drake_abs.multibody.floating import quaternion_starts
@@ -479,16 +479,19 @@ class ContactModelBase(ABC):
         derivatives: bool = True,
         kinematics=None,
         damping: np.ndarray | None = None,
+        springs: JointSprings | None = None,
     ) -> StepQuantities:
         """Quantities for a batch: q (B, nq), v (B, nv), u (B, nu), for the contacts ``active``
         (indices; all by default), with derivatives with respect to p = (q, v, u) unless
         ``derivatives=False``. ``kinematics``: a provider's own kinematics of a one-state batch,
         already evaluated at q (see :meth:`quantities_within`). ``damping``: joint damping per
-        velocity (nv,), taken implicitly (:mod:`drake_abs.contact.damping`): the quantities of
-        the damped step (W = (M + h D)^-1 and its free velocity)."""
+        velocity (nv,), and ``springs``: joint springs
+        (:class:`~drake_abs.contact.damping.JointSprings`), both taken implicitly
+        (:mod:`drake_abs.contact.damping`): the quantities of the damped step (W = (M + h D')^-1
+        with ``D' = D + h K``, and its free velocity with the springs' torques)."""
         quant = self._quantities(q, v, u, active, derivatives, kinematics)
-        if damping is not None and np.any(damping):
-            quant = implicit_damping(quant, damping, self.h)[0]
+        if (damping is not None and np.any(damping)) or (springs is not None and springs.active):
+            quant = implicit_damping(quant, damping, self.h, springs=springs)[0]
         return quant
 
     def _quantities(self, q, v, u, active, derivatives: bool, kinematics) -> StepQuantities:
@@ -516,12 +519,15 @@ class ContactModelBase(ABC):
     def quantities_within(
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray, distance: float, *,
         derivatives: bool = True, damping: np.ndarray | None = None,
+        springs: JointSprings | None = None,
     ) -> tuple[np.ndarray, StepQuantities]:  # fmt: skip
         """For one state (q (1, nq), v (1, nv), u (1, nu)): the indices of the candidates within
         ``distance`` (m) and their quantities. Providers may share the kinematics between the
         two (pinocchio does); the result equals ``distances`` then ``quantities``."""
         active = np.flatnonzero(self.distances(q)[0] <= distance)
-        return active, self.quantities(q, v, u, active, derivatives=derivatives, damping=damping)
+        return active, self.quantities(
+            q, v, u, active, derivatives=derivatives, damping=damping, springs=springs
+        )
 
     @abstractmethod
     def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:

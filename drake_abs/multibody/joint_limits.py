@@ -1,6 +1,6 @@
 """What a model declares about its joints and actuators, as the step uses it (docs/math.md
-section 6c): position limits as unilateral complementarity rows, viscous damping (applied
-implicitly, :mod:`drake_abs.contact.damping`) and actuator effort limits.
+section 6c): position limits as unilateral complementarity rows, viscous damping and joint
+springs (applied implicitly, :mod:`drake_abs.contact.damping`) and actuator effort limits.
 
 A single-degree-of-freedom joint (revolute or prismatic) with a finite lower limit gives the row
 ``phi = q_i - lower >= 0`` and one with a finite upper limit ``phi = upper - q_i >= 0``, with the
@@ -16,7 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import JointActuatorIndex, JointIndex
+from pydrake.multibody.tree import (
+    ForceElementIndex,
+    JointActuatorIndex,
+    JointIndex,
+    PrismaticSpring,
+    RevoluteSpring,
+)
+
+from drake_abs.contact.damping import JointSprings
 
 
 @dataclass(frozen=True)
@@ -93,6 +101,36 @@ def joint_damping(plant: MultibodyPlant) -> np.ndarray:
             start = joint.velocity_start()
             damping[start : start + joint.num_velocities()] = joint.default_damping_vector()
     return damping
+
+
+def joint_springs(plant: MultibodyPlant) -> JointSprings:
+    """The plant's joint springs per velocity (:class:`~drake_abs.contact.damping.JointSprings`):
+    every ``RevoluteSpring`` and ``PrismaticSpring`` force element (an SDF joint's
+    ``spring_stiffness``, an MJCF joint's ``stiffness``: see
+    :func:`~drake_abs.multibody.model_files.apply_mjcf`) on its joint's velocity, with its
+    stiffness (N m / rad or N / m) and nominal position (rad or m). Several springs on one joint
+    add up (their stiffnesses, and the stiffness-weighted mean of their references). Every
+    one-velocity, one-position joint has its position coordinate in ``q_index`` (so that a
+    stiffness can be given to it later); other velocities have -1."""
+    nv = plant.num_velocities()
+    stiffness, moment, q_index = np.zeros(nv), np.zeros(nv), np.full(nv, -1, dtype=np.int64)
+    for j in plant.GetJointIndices():
+        joint = plant.get_joint(JointIndex(int(j)))
+        if joint.num_velocities() == 1 and joint.num_positions() == 1:
+            q_index[joint.velocity_start()] = joint.position_start()
+    for i in range(plant.num_force_elements()):
+        element = plant.get_force_element(ForceElementIndex(i))
+        if isinstance(element, RevoluteSpring):
+            k, ref = element.default_stiffness(), element.default_nominal_angle()
+        elif isinstance(element, PrismaticSpring):
+            k, ref = element.stiffness(), element.nominal_position()
+        else:
+            continue
+        v = element.joint().velocity_start()
+        stiffness[v] += k
+        moment[v] += k * ref
+    reference = np.divide(moment, stiffness, out=np.zeros(nv), where=stiffness > 0)
+    return JointSprings(stiffness, reference, q_index)
 
 
 def effort_limits(plant: MultibodyPlant) -> np.ndarray:

@@ -9,12 +9,14 @@ columns and their units),
 parameters=...)``. The columns, in order: the ground height (m), each frictional candidate's
 friction coefficient, each body's mass (kg), each point candidate's radius (m), each
 one-velocity joint's damping (N m s / rad or N s / m; only under ``damping=True``), each point
-candidate's offset (m, three columns), each body's unit rotational inertia (m^2, six columns).
+candidate's offset (m, three columns), each body's unit rotational inertia (m^2, six columns),
+then each one-velocity joint's spring stiffness (N m / rad or N / m) and spring reference (rad
+or m; both only under ``springs=True``).
 
 - :func:`damping_joints`, :func:`parameter_names`, :func:`parameter_values`: the columns and
   their values in a contact model;
-- :func:`parameter_vector`, :func:`with_values`: new values, checked, and the contact model
-  and joint damping that carry them;
+- :func:`parameter_vector`, :func:`with_values`: new values, checked, and the contact model,
+  joint damping and joint springs that carry them;
 - :func:`parameter_columns`: the columns a step is asked for;
 - :func:`parameter_derivatives`, :func:`damping_columns`: one batched step's theta block
   (:class:`~drake_abs.contact.step_data.ParameterDerivatives`), B states and T columns.
@@ -30,6 +32,7 @@ import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_abs.contact.cone import FrictionCone
+from drake_abs.contact.damping import JointSprings
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 from drake_abs.multibody.drake_dynamics import (
     INERTIA_ENTRIES,
@@ -45,6 +48,7 @@ _PARAMETER_RANGES = {
     "mass[": (0.0, True, " kg"),
     "radius[": (0.0, False, " m"),
     "damping[": (0.0, False, " N m s / rad or N s / m"),
+    "stiffness[": (0.0, False, " N m / rad or N / m"),
 }
 
 
@@ -69,10 +73,13 @@ def damping_joints(plant: MultibodyPlant) -> tuple[tuple[str, int], ...]:
 
 
 def parameter_names(
-    model: ContactModelBase, joints: tuple[tuple[str, int], ...]
+    model: ContactModelBase,
+    joints: tuple[tuple[str, int], ...],
+    spring_joints: tuple[tuple[str, int], ...] = (),
 ) -> tuple[str, ...]:
     """The names of the model parameters of ``model`` in column order (T,), with the damping
-    columns of ``joints`` (:func:`damping_joints`, or none): see
+    columns of ``joints`` and the spring columns (stiffness, then reference) of
+    ``spring_joints`` (:func:`damping_joints`, or none): see
     :attr:`~drake_abs.multibody.stepper.ComplementarityStepper.parameter_names`."""
     coeff = model.cone.coefficients
     points = model.point_contacts
@@ -88,15 +95,23 @@ def parameter_names(
             for name in model.massive_bodies
             for entry in INERTIA_ENTRIES
         )
+        + tuple(f"stiffness[{name}]" for name, _ in spring_joints)
+        + tuple(f"springref[{name}]" for name, _ in spring_joints)
     )
 
 
 def parameter_values(
-    model: ContactModelBase, damping: np.ndarray, joints: tuple[tuple[str, int], ...]
+    model: ContactModelBase,
+    damping: np.ndarray,
+    joints: tuple[tuple[str, int], ...],
+    springs: JointSprings | None = None,
+    spring_joints: tuple[tuple[str, int], ...] = (),
 ) -> np.ndarray:
     """The values (T,) of :func:`parameter_names` in ``model``, with the joint damping
-    ``damping`` (nv,) of ``joints``; see
+    ``damping`` (nv,) of ``joints`` and the joint ``springs`` of ``spring_joints``; see
     :meth:`~drake_abs.multibody.stepper.ComplementarityStepper.parameter_values`."""
+    if spring_joints and springs is None:
+        raise ValueError("springs must be given with spring_joints")
     m = model
     coeff = m.cone.coefficients
     inertias = [m.body_spatial_inertia(index) for _, index in m._massive]
@@ -108,6 +123,8 @@ def parameter_values(
         [damping[v] for _, v in joints],
         np.reshape([c.p_BC for c in points], -1),
         np.reshape([central_unit_inertia(M)[rows, cols] for M in inertias], -1),
+        [springs.stiffness[v] for _, v in spring_joints],
+        [springs.reference[v] for _, v in spring_joints],
     ]).astype(float)  # fmt: skip
 
 
@@ -166,10 +183,13 @@ def with_values(
     names: tuple[str, ...],
     new: np.ndarray,
     current: np.ndarray,
-) -> tuple[ContactModelBase, np.ndarray, dict[str, float]]:
-    """The contact model and joint damping (nv,) whose parameter values are ``new`` (T,,
-    checked: :func:`parameter_vector`), where ``model``, ``damping`` and ``joints`` have
-    ``current``; and the changed values ``{name: value}``.
+    springs: JointSprings | None = None,
+    spring_joints: tuple[tuple[str, int], ...] = (),
+) -> tuple[ContactModelBase, np.ndarray, JointSprings | None, dict[str, float]]:
+    """The contact model, joint damping (nv,) and joint springs whose parameter values are
+    ``new`` (T,, checked: :func:`parameter_vector`), where ``model``, ``damping``, ``joints``,
+    ``springs`` and ``spring_joints`` have ``current``; and the changed values ``{name:
+    value}``.
 
     The plant is shared (its default inertias cannot change once finalized): where a value
     changed, the contact model is rebuilt on it with the bodies' inertias as overrides
@@ -221,7 +241,13 @@ def with_values(
     damping = damping.copy()
     for joint, v in joints:
         damping[v] = value[f"damping[{joint}]"]
-    return model, damping, changed
+    if spring_joints:
+        stiffness, reference = springs.stiffness.copy(), springs.reference.copy()
+        for joint, v in spring_joints:
+            stiffness[v] = value[f"stiffness[{joint}]"]
+            reference[v] = value[f"springref[{joint}]"]
+        springs = JointSprings(stiffness, reference, springs.q_index)
+    return model, damping, springs, changed
 
 
 def parameter_columns(
@@ -260,8 +286,8 @@ def parameter_derivatives(
     coefficient is its own column; the masses and unit inertias move W and the free velocity; a
     point candidate's radius and offset move its distance and its rows
     (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.point_parameter_derivatives`);
-    the smoothing parameters (trailing columns) move mu only. The joint-damping columns are
-    filled in later, on the damped step (:func:`damping_columns`)."""
+    the smoothing parameters (trailing columns) move mu only. The joint-damping and
+    joint-spring columns are filled in later, on the damped step (:func:`damping_columns`)."""
     column = {name: j for j, name in enumerate(names)}
     B, T = q.shape[0], len(names)
     nv = model.nv
@@ -322,19 +348,40 @@ def damping_columns(
     names: tuple[str, ...],
     joints: tuple[tuple[str, int], ...],
     h: float,
+    springs: JointSprings | None = None,
+    spring_joints: tuple[tuple[str, int], ...] = (),
 ) -> ParameterDerivatives:
-    """``par`` with the joint-damping columns of ``names`` (those of ``joints``) filled in, on
-    the damped step's ``W' = (M + h D)^-1`` and ``v_free' = W' M v_free`` (``quant``; with all
-    damping 0 the undamped ones, W' = W) of time step h (s): for joint velocity j,
-    ``dW'/dD_j = -h W' e_j e_j^T W'`` and ``dv_free'/dD_j = -h W' e_j v_free'_j`` (docs/math.md
-    section 6d)."""
+    """``par`` with the joint-damping columns of ``names`` (those of ``joints``) and the
+    joint-spring columns (``stiffness[...]``, ``springref[...]`` of ``spring_joints``, with the
+    ``springs`` of the step) filled in, on the damped step's ``W' = (M + h D')^-1`` (``D' = D +
+    h K``) and ``v_free'`` (``quant``, at positions ``quant.q``; with no damping and no spring
+    the undamped ones, W' = W) of time step h (s): for joint velocity j (position i),
+
+    - ``dW'/dD_j = -h W' e_j e_j' W'``, ``dv_free'/dD_j = -h W' e_j v_free'_j``;
+    - ``dW'/dK_j = h dW'/dD_j``, ``dv_free'/dK_j = -h W' e_j (h v_free'_j + q_i - q_ref,j)``;
+    - ``dv_free'/dq_ref,j = h K_j W' e_j`` (W' does not move)
+
+    (docs/math.md section 6d)."""
     column = {name: j for j, name in enumerate(names)}
     cols = [(column[f"damping[{name}]"], v) for name, v in joints if f"damping[{name}]" in column]
-    if not cols:
+    stiff, refs = [], []
+    for name, v in spring_joints:
+        if f"stiffness[{name}]" in column:
+            stiff.append((column[f"stiffness[{name}]"], v))
+        if f"springref[{name}]" in column:
+            refs.append((column[f"springref[{name}]"], v))
+    if not (cols or stiff or refs):
         return par
     W, v_free = quant.W, quant.v_free
     dW, dv_free = par.dW.copy(), par.dv_free.copy()
     for j, v in cols:
         dW[..., j] = -h * W[:, :, v, None] * W[:, None, v, :]
         dv_free[..., j] = -h * W[:, :, v] * v_free[:, v, None]
+    for j, v in stiff:
+        stretch = quant.q[:, springs.q_index[v]] - springs.reference[v]  # (B,)
+        dW[..., j] = -(h**2) * W[:, :, v, None] * W[:, None, v, :]
+        dv_free[..., j] = -h * W[:, :, v] * (h * v_free[:, v] + stretch)[:, None]
+    for j, v in refs:
+        dW[..., j] = 0.0
+        dv_free[..., j] = h * springs.stiffness[v] * W[:, :, v]
     return replace(par, dW=dW, dv_free=dv_free)

@@ -44,7 +44,7 @@ from pydrake.multibody.tree import (
     WeldJoint,
 )
 
-from drake_abs.contact.damping import check_damping
+from drake_abs.contact.damping import JointSprings, check_springs, effective_damping
 from drake_abs.contact.step_data import StepQuantities
 from drake_abs.multibody.drake_dynamics import (
     ContactModelBase,
@@ -251,24 +251,28 @@ class PinocchioContactModel(ContactModelBase):
         return self._batch_centres(H) @ self.normal - self._radius - self.ground.height
 
     def quantities(
-        self, q, v, u, active=None, *, derivatives=True, kinematics=None, damping=None
-    ) -> StepQuantities:
+        self, q, v, u, active=None, *, derivatives=True, kinematics=None, damping=None,
+        springs: JointSprings | None = None,
+    ) -> StepQuantities:  # fmt: skip
         """As the base class; a batch without quaternion floating joints (any B) is evaluated in
         one pass: one pinocchio call per state (``computeABADerivatives``, which
         also places the joints and fills their Jacobians; or ``computeJointJacobians``, ``aba``
         and ``computeMinverse`` without derivatives), then every contact row of the batch in
-        one compiled kernel (:func:`_contact_rows_batch`). Joint damping is then taken in the
-        same call: the model's armature plus ``h D`` gives ``M + h D`` and the torque ``tau - D
-        v``, so ``W = (M + h D)^-1`` and the damped free velocity come out of the one ABA
-        (equal to :func:`~drake_abs.contact.damping.implicit_damping` of the undamped ones)."""
+        one compiled kernel (:func:`_contact_rows_batch`). Joint damping and springs are then
+        taken in the same call: with the effective damping ``D' = D + h K`` the model's
+        armature plus ``h D'`` gives ``M + h D'`` and the torque ``tau - D' v - K (q - q_ref)``,
+        so ``W = (M + h D')^-1`` and the damped free velocity come out of the one ABA (equal to
+        :func:`~drake_abs.contact.damping.implicit_damping` of the undamped ones)."""
         if self._coords is not None or self.affine is not None:
             return super().quantities(
-                q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping
-            )
+                q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping,
+                springs=springs,
+            )  # fmt: skip
         active = np.arange(len(self.contacts)) if active is None else np.asarray(active, int)
-        D = None if damping is None else check_damping(damping, self.nv, self.h)
-        D = D if D is not None and D.any() else None
-        return self._batch_quantities(q, v, u, active, derivatives, D)
+        springs = check_springs(springs, self.nv)
+        D = effective_damping(damping, springs, self.nv, self.h)
+        D = D if D.any() else None
+        return self._batch_quantities(q, v, u, active, derivatives, D, springs)
 
     def _damped_model(self, D: np.ndarray | None) -> tuple:
         """``(model, data)`` whose mass matrix is M + h D (armature plus h D; the model itself
@@ -283,13 +287,19 @@ class PinocchioContactModel(ContactModelBase):
             cache[key] = (model, model.createData())
         return cache[key]
 
-    def _batch_quantities(self, q, v, u, active, derivatives: bool, D) -> StepQuantities:
+    def _batch_quantities(
+        self, q, v, u, active, derivatives: bool, D, springs: JointSprings | None = None
+    ) -> StepQuantities:
+        """The batched pass of :meth:`quantities` with the effective damping D (nv,) or None
+        and the springs (their stiffness included in D) or None."""
         model, data = self._damped_model(D)
         q, v = np.array(q, float), np.array(v, float)  # copies: dW_times holds q
         B, nq, nv, nu, h = len(q), self.nq, self.nv, self.nu, self.h
         tau = np.asarray(u, float) @ self.B_act.T
         if D is not None:
             tau = tau - D * v  # the damping force at the step's end: h D v+ moved into M
+        if springs is not None:
+            tau = tau + springs.torque(q)  # the spring's torque at q (its h K v+ is in D)
         W = np.empty((B, nv, nv))
         a = np.empty((B, nv))
         J = np.empty((B, 6, nv))
@@ -327,6 +337,8 @@ class PinocchioContactModel(ContactModelBase):
         dv_free[:, :, nq : nq + nv] = np.eye(nv) + h * da_dv
         if D is not None:  # tau - D v depends on v
             dv_free[:, :, nq : nq + nv] -= h * W * D
+        if springs is not None:  # and the springs' torque on q
+            dv_free[:, :, :nq] += h * W @ springs.torque_jacobian(nq)
         dv_free[:, :, nq + nv :] = h * W @ self.B_act
 
         fm, fd = self._free_model, self._free_data
@@ -358,19 +370,20 @@ class PinocchioContactModel(ContactModelBase):
         self._read_placements(H, 0, self.pin_data)
         return self._batch_centres(H)[0], np.array(self.pin_data.J).reshape(6, self.nv), maps
 
-    def quantities_within(self, q, v, u, distance, *, derivatives=True, damping=None):
+    def quantities_within(self, q, v, u, distance, *, derivatives=True, damping=None, springs=None):
         """As the base class; with quaternion floating joints, one kinematics pass serves the
         distances and the quantities."""
         if self.affine is not None or self._coords is None:  # distances, then the batched pass
             return super().quantities_within(
-                q, v, u, distance, derivatives=derivatives, damping=damping
+                q, v, u, distance, derivatives=derivatives, damping=damping, springs=springs
             )
         kinematics = self._kinematics(np.asarray(q[0], float))
         phi = kinematics[0] @ self.normal - self._radius - self.ground.height
         active = np.flatnonzero(phi <= distance)
         quant = self.quantities(
-            q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping
-        )
+            q, v, u, active, derivatives=derivatives, kinematics=kinematics, damping=damping,
+            springs=springs,
+        )  # fmt: skip
         return active, quant
 
     def _contacts(self, kinematics, active, derivatives: bool, P: int = 0):

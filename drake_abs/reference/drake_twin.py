@@ -4,7 +4,10 @@ scene's contact points (listed, or expanded from a body's collision shapes as
 :func:`~drake_abs.multibody.builder.scene_contacts` does), the collision shapes of each
 body-body pair, and a ground box, so that Drake and this project simulate the same contacts side
 by side. Collision filters leave only the scene's contacts active: point contacts against the
-ground, and each pair's shapes against each other.
+ground, and each pair's shapes against each other. The models are parsed as the step's plant is
+(:func:`~drake_abs.multibody.builder.add_scene_models`), so the twin has the same joint damping,
+limits, motors and joint springs (an MJCF joint's ``stiffness`` as a ``RevoluteSpring`` or
+``PrismaticSpring`` force element, which Drake's discrete update applies).
 
 With ``hydroelastic`` settings the twin uses Drake's hydroelastic contact instead: each body
 that carries the scene's ground contacts collides through its drawn (visual) shapes, made

@@ -127,6 +127,8 @@ def test_gym_scene_honours_the_files_limits_damping_armature_and_motors(name):
         else:
             assert (j["lower"], j["upper"]) == (-math.inf, math.inf)
         assert j["damping"] == float(a.get("damping", 0))
+        assert j["stiffness"] == float(a.get("stiffness", 0))  # the joint springs
+        assert j["springref"] == float(a.get("springref", 0))
         assert j["armature"] == pytest.approx(float(a.get("armature", 0)), rel=1e-12)
     motors = root.find("actuator").findall("motor")
     default_ctrl = root.find("default/motor").get("ctrlrange")
@@ -219,12 +221,21 @@ def test_armature_is_in_the_dynamics_whichever_provider():
         np.testing.assert_allclose(cm.pin_model.armature, [0, 0, 0, 1, 1, 1])
 
 
-def test_half_cheetah_without_ignore_is_refused_naming_joint_and_attribute():
+def test_half_cheetah_springs_come_from_the_file_unless_ignored():
+    """The scene lists nothing to ignore: the file's joint springs are in the plant (Drake's
+    RevoluteSpring force elements) and in the step; ``ignore: [joint.stiffness]`` drops
+    them, and says so."""
     scene = Scene.load("gym_half_cheetah")
-    bare = Scene.from_dict({**scene.to_dict(), "models": [{"file": "gymnasium:half_cheetah.xml"}]})
-    with pytest.raises(ValueError, match=r"models\[0\].*joint 'bthigh': stiffness=240.*") as err:
-        build_scene_model(bare)
-    assert "'joint.stiffness'" in str(err.value) and "ignore" in str(err.value)
+    assert scene.models[0].ignore == ()
+    stepper = build_scene_model(scene).stepper()
+    assert stepper.springs.stiffness.tolist() == [0, 0, 0, 240, 180, 120, 180, 120, 60]
+    model = {**scene.to_dict()["models"][0], "ignore": ["joint.stiffness"]}
+    dropped = build_scene_model(Scene.from_dict({**scene.to_dict(), "models": [model]}))
+    assert not dropped.stepper().springs.active
+    path = gymnasium_assets_dir() / "half_cheetah.xml"
+    info = read_mjcf(path, ("joint.stiffness",))
+    assert info.springs == () and len(info.dropped) == 6
+    assert "joint 'bthigh': stiffness=240 (a joint spring)" in info.dropped
 
 
 @pytest.mark.parametrize(

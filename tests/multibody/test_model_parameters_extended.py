@@ -133,9 +133,10 @@ def test_parameter_names_are_unique_and_values_follow_them(name):
     np.testing.assert_array_equal(
         values[start : start + 3 * nc], np.reshape([c.p_BC for c in cm.contacts], -1)
     )
-    # last (so that the columns before keep their indices): each body's unit inertia about its
-    # centre of mass (m^2), its rotational inertia about the centre of mass over its mass
-    inertias = names[start + 3 * nc :]
+    # after them (so that the columns before keep their indices): each body's unit inertia
+    # about its centre of mass (m^2), its rotational inertia about the centre of mass over its
+    # mass; then the joint springs' stiffness and reference, last
+    inertias = names[start + 3 * nc : start + 3 * nc + 6 * nb]
     entries = ("xx", "yy", "zz", "xy", "xz", "yz")
     assert inertias == tuple(f"unit_inertia[{b}].{e}" for b in cm.massive_bodies for e in entries)
     ctx = cm.plant.CreateDefaultContext()
@@ -145,10 +146,18 @@ def test_parameter_names_are_unique_and_values_follow_them(name):
         want = I_com[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]] / M.get_mass()
         got = values[start + 3 * nc + 6 * k : start + 3 * nc + 6 * (k + 1)]
         np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-18)
-    # without joint damping in the step, damping is no parameter
+    springs = names[start + 3 * nc + 6 * nb :]
+    assert springs == tuple(f"stiffness[{j.name()}]" for j in one_dof) + tuple(
+        f"springref[{j.name()}]" for j in one_dof
+    )
+    np.testing.assert_array_equal(values[start + 3 * nc + 6 * nb :], 0.0)  # no spring here
+    # without joint damping (springs) in the step, damping (stiffness) is no parameter
     undamped = ComplementarityStepper(cm, damping=False)
     assert not any(n.startswith("damping[") for n in undamped.parameter_names)
     assert undamped.parameter_values().shape == (len(undamped.parameter_names),)
+    unsprung = ComplementarityStepper(cm, springs=False)
+    assert not any(n.startswith(("stiffness[", "springref[")) for n in unsprung.parameter_names)
+    assert unsprung.parameter_names == names[: len(names) - 2 * len(one_dof)]
 
 
 @pytest.mark.parametrize("dynamics", ["pinocchio", "drake"])
