@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from drake_abs.contact.compliance import SoftRows
 from drake_abs.contact.cone import FrictionCone, GeneratorSmoothing
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import Smoothing
@@ -27,12 +28,15 @@ def anitescu_step(
     strict: bool,
     par: ParameterDerivatives | None,
     options: dict[str, float],
+    compliance: SoftRows | None = None,
 ) -> ContactStepResult:
     """The step under the Anitescu formulation (docs/math.md section 6b): the generator rows
     ``D = Jn[c] + alpha Jt[j]`` as a frictionless LCP (positive semidefinite ``h D W D^T``,
     regularized), its results mapped back to the Stewart-Trinkle layout. The arguments are
     those of :func:`drake_abs.contact.contact_lcp.contact_step` (``par``: its ``parameters``),
-    checked there, with ``options`` its complete solver options."""
+    checked there, with ``options`` its complete solver options; ``compliance`` (per normal
+    row) is shared by each contact's generators (their weights are set for that by
+    :meth:`~drake_abs.contact.compliance.ContactCompliance.rows`)."""
     g = cone.generators
     ng = g.size
     fr = g.tangent >= 0
@@ -87,6 +91,7 @@ def anitescu_step(
     r = stewart_trinkle_step(
         quant_g, cone_g, h, GeneratorSmoothing(smoothing, g), gradient, strict, par_g, options,
         regularize_normal=True,
+        compliance=None if compliance is None else compliance.take(g.contact),
     )  # fmt: skip
     L = g.to_lam
     lam_g = r.lam

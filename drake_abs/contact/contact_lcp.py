@@ -41,7 +41,9 @@ The step's parts, one module each:
 - :mod:`drake_abs.contact.stewart_trinkle`: the LCP above, assembled, solved and integrated;
 - :mod:`drake_abs.contact.anitescu`: the Anitescu formulation (docs/math.md section 6b);
 - :mod:`drake_abs.contact.step_jacobians`: the chain rule to dx+/dx, dx+/du and the model
-  parameters' columns.
+  parameters' columns;
+- :mod:`drake_abs.contact.compliance`: the soft-contact option (MuJoCo's solref and solimp),
+  which adds a regulariser to the normal rows' diagonal and replaces their constant.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from drake_abs.contact.anitescu import anitescu_step
+from drake_abs.contact.compliance import SoftRows
 from drake_abs.contact.cone import FORMULATIONS, FrictionCone
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, Smoothing
@@ -80,12 +83,15 @@ def contact_step(
     gradient: GradientMode = "total",
     strict: bool = False,
     parameters: ParameterDerivatives | None = None,
+    compliance: SoftRows | None = None,
     **solver_options,
 ) -> ContactStepResult:
     """Advance a batch of rigid-body states one step (see the module docstring).
 
     Jacobians are computed when ``quant`` carries derivatives; with ``parameters`` (which needs
-    them), also ``dx_dtheta`` and ``dlam_dtheta``. ``solver_options`` go to
+    them), also ``dx_dtheta`` and ``dlam_dtheta``. ``compliance`` (one entry per normal row:
+    :class:`~drake_abs.contact.compliance.SoftRows`) makes its soft rows MuJoCo's soft contact,
+    a regularised LCP (:mod:`drake_abs.contact.compliance`); None: hard. ``solver_options`` go to
     :func:`drake_abs.solve_lcp` (tol, max_iterations, exact_tol; defaults in
     :data:`CONTACT_SOLVER_DEFAULTS`).
     """
@@ -111,9 +117,17 @@ def contact_step(
         )
     options.setdefault("tol", 1e-12)
     check_solver_options(options["tol"], options["max_iterations"], options["exact_tol"])
+    if compliance is not None and compliance.soft.shape != (nc,):
+        raise ValueError(
+            f"compliance must have one entry per normal row ({nc}); got {compliance.soft.shape}"
+        )
     if cone.formulation == "anitescu" and nf > 0:
-        return anitescu_step(quant, cone, h, smoothing, gradient, strict, parameters, options)
-    return stewart_trinkle_step(quant, cone, h, smoothing, gradient, strict, parameters, options)
+        return anitescu_step(
+            quant, cone, h, smoothing, gradient, strict, parameters, options, compliance
+        )
+    return stewart_trinkle_step(
+        quant, cone, h, smoothing, gradient, strict, parameters, options, compliance=compliance
+    )
 
 
 def _free_step(

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from drake_abs.contact.compliance import RowTerms
 from drake_abs.contact.cone import FrictionCone, expand_mu
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import Smoothing
@@ -45,6 +46,7 @@ def step_jacobians(
     smoothing: Smoothing,
     gradient: GradientMode,
     par: ParameterDerivatives | None,
+    soft: RowTerms | None = None,
 ) -> dict[str, np.ndarray]:
     """The chain rule of this module's docstring: dx+/d(x, u) and dlam/d(x, u); with ``par``, the
     theta columns (:func:`parameter_blocks`) appended to the same chain, giving dx+/dtheta and
@@ -53,7 +55,9 @@ def step_jacobians(
     The step's solve: its LCP F (B, d, d), z (B, d) and row scale S (nc + nt,)
     (:func:`~drake_abs.contact.stewart_trinkle.assemble_lcp`), the rows G = [Jn; Jt]
     (B, nc + nt, nv), the solution lam (B, d) with the solver's Jacobians (``lcp``), the
-    generalised impulse f = G^T lam (B, nv) and v+ (B, nv).
+    generalised impulse f = G^T lam (B, nv) and v+ (B, nv). ``soft``: the compliance terms of
+    the normal rows (:class:`~drake_abs.contact.compliance.RowTerms`), whose own derivatives
+    (through phi and J v) are added to the hard rows' (None: hard contact).
 
     Returns:
         ``dx_dx`` (B, nq + nv, nq + nv), ``dx_du`` (B, nq + nv, nu), ``dlam_dx`` (B, d, nq + nv)
@@ -78,8 +82,19 @@ def step_jacobians(
         dzn = h * np.einsum("brn,bnp->brp", quant.Jn, quant.dv_free)
         dzn[..., : quant.dphi.shape[-1]] += quant.dphi
         dzn[..., : quant.dJn.shape[-1]] += h * np.einsum("brnp,bn->brp", quant.dJn, quant.v_free)
+    if soft is not None:  # compliance: R and c move with phi and J v
+        dphi, dJv = _soft_inputs(quant)
+        dz_eff[:, :nc] += soft.extra_derivative(dphi, dJv, lam[:, :nc], h)
+        if total:
+            dzn += soft.extra_derivative(dphi, dJv, None, h)
     if par is not None:  # theta columns after p
         inner_t, dz_t, dzn_t = parameter_blocks(quant, cone, h, S, G, lam, f, v_next, par)
+        if soft is not None:
+            dJv_t = 0.0 * par.dphi
+            if par.dJn is not None:
+                dJv_t = np.einsum("bint,bn->bit", par.dJn, quant.v)
+            dz_t[:, :nc] += soft.extra_derivative(par.dphi, dJv_t, lam[:, :nc], h)
+            dzn_t = dzn_t + soft.extra_derivative(par.dphi, dJv_t, None, h)
         inner = np.concatenate([inner, inner_t], axis=-1)
         dz_eff = np.concatenate([dz_eff, dz_t], axis=-1)
         if total:
@@ -99,6 +114,16 @@ def step_jacobians(
     if par is not None:
         out.update(dx_dtheta=dx[:, :, P:], dlam_dtheta=dlam[:, :, P:])
     return out
+
+
+def _soft_inputs(quant: StepQuantities) -> tuple[np.ndarray, np.ndarray]:
+    """The normal rows' dphi and d(J_n v) with respect to p = (q, v, u), all P columns
+    (B, nc, P): ``d(J_n v) = dJ_n v + J_n dv``."""
+    nq, nv = quant.q.shape[1], quant.v.shape[1]
+    dphi = quant.full("dphi")
+    dJv = np.einsum("bnvp,bv->bnp", quant.full("dJn"), quant.v)
+    dJv[:, :, nq : nq + nv] += quant.Jn
+    return dphi, dJv
 
 
 def parameter_blocks(

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from drake_abs.contact.compliance import SoftRows
 from drake_abs.contact.cone import FrictionCone, expand_mu
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import Smoothing
@@ -115,14 +116,21 @@ def stewart_trinkle_step(
     parameters: ParameterDerivatives | None,
     options: dict[str, float],
     regularize_normal: bool = False,
+    compliance: SoftRows | None = None,
 ) -> ContactStepResult:
     """Assemble, smooth, solve (with the exact fallback), integrate and differentiate one
     batched step whose LCP rows are the cone's (Stewart-Trinkle, or Anitescu generators passed
     as a frictionless cone with ``regularize_normal``). The arguments are those of
     :func:`drake_abs.contact.contact_lcp.contact_step`, checked there, with ``options`` its
-    complete solver options."""
+    complete solver options; ``compliance`` (per normal row) regularises its soft rows
+    (:mod:`drake_abs.contact.compliance`)."""
     nc, nt, nf = cone.sizes()
     F, z, S = assemble_lcp(quant, cone, h, regularize_normal=regularize_normal)
+    soft = None
+    if compliance is not None:  # MuJoCo's soft rows: F_ii += h R_i, z_i = c_i + h J_i v_free
+        Jv = np.einsum("bin,bn->bi", quant.Jn, quant.v)
+        soft = compliance.terms(quant.phi, Jv, h)
+        soft.apply(F, z, quant.phi, h)
     Fnn = F[:, :nc, :nc]
     mu_n = smoothing.mu(z[:, :nc], Fnn)
     mu = expand_mu(mu_n, cone, h)
@@ -141,8 +149,9 @@ def stewart_trinkle_step(
     out = dict(dx_dx=None, dx_du=None, dlam_dx=None, dlam_du=None)
     if jac:
         out = step_jacobians(
-            quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, gradient, parameters
-        )
+            quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, gradient, parameters,
+            soft,
+        )  # fmt: skip
     return ContactStepResult(
         q_next=q_next,
         v_next=v_next,

@@ -40,6 +40,7 @@ from drake_abs.multibody.model_files import format_model_report, model_report
 from drake_abs.multibody.parsing import add_model_specs
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 from drake_abs.multibody.scene import Scene
+from drake_abs.multibody.scene_compliance import scene_compliance
 from drake_abs.multibody.stepper import ComplementarityStepper
 
 
@@ -74,7 +75,8 @@ class SceneModel:
         friction: str | None = None,
         **solver_options,
     ) -> ComplementarityStepper:
-        """The scene's batched step, with the scene's smoothing and activation distance.
+        """The scene's batched step, with the scene's smoothing, activation distance and
+        contact compliance (:mod:`drake_abs.multibody.scene_compliance`).
 
         Args:
             smoothing: replaces the scene's smoothing (larger mu: more smoothing). It
@@ -93,6 +95,7 @@ class SceneModel:
             gradient,
             self.scene.activation_distance if activation_distance is None else activation_distance,
             self.scene.friction_model if friction is None else friction,
+            compliance=scene_compliance(self.scene, self.contact_model),
             **solver_options,
         )
         stepper.scene, stepper.rebuild = self.scene, rebuild_stepper  # picklable

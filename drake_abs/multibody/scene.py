@@ -32,6 +32,10 @@ The keys, each with its form and meaning, are those of :class:`Scene` and of its
 smoothing. Each key is stated once, as a field of these dataclasses (its annotation, its default,
 and :func:`~drake_abs.multibody.scene_entries.key`'s form and explanation).
 
+The contact law is a union by kind too (``compliance``: ``{kind: hard}``, the default, or
+``{kind: mujoco, solref: [0.02, 1], solimp: [...], margin: ...}`` or ``{kind: mujoco,
+from_model: true}``: MuJoCo's soft contact, :mod:`drake_abs.contact.compliance`).
+
 Smoothing is a union by kind: :class:`ExactSmoothing` | :class:`FixedSmoothing` |
 :class:`ContactAwareSmoothing` | :class:`GaussianMatchedSmoothing`. A file writes it as a plain
 mapping whose ``kind`` names the member (``{kind: fixed, value: 1.0e-4}``; no ``kind``: exact), as
@@ -73,6 +77,7 @@ import numpy as np
 import yaml
 from pydrake.common.yaml import yaml_dump, yaml_load_typed
 
+from drake_abs.contact.compliance import check_solimp, check_solref
 from drake_abs.contact.contact_lcp import FORMULATIONS
 from drake_abs.contact.smoothing import (
     ContactAware,
@@ -86,7 +91,9 @@ from drake_abs.multibody.contacts import contact_candidates
 from drake_abs.multibody.packages import PACKAGE_DIR, model_file_problem, resolve_package_file
 from drake_abs.multibody.scene_entries import (
     ContactSpec,
+    HardCompliance,
     ModelSpec,
+    MujocoCompliance,
     PairSpec,
     documented,
     is_required,
@@ -194,6 +201,13 @@ SmoothingSpec = ExactSmoothing | FixedSmoothing | ContactAwareSmoothing | Gaussi
 #: The kinds of smoothing a scene names, by ``kind``.
 SMOOTHING_KINDS: dict[str, type[_Smoothing]] = {k.kind: k for k in typing.get_args(SmoothingSpec)}
 
+#: The contact compliance of a scene, a union by kind (the type of :attr:`Scene.compliance`):
+#: hard (the default) or MuJoCo's soft contact.
+ComplianceSpec = HardCompliance | MujocoCompliance
+
+#: The kinds of contact compliance a scene names, by ``kind``.
+COMPLIANCE_KINDS: dict[str, type] = {k.kind: k for k in typing.get_args(ComplianceSpec)}
+
 
 @documented
 @dataclass(frozen=True)
@@ -266,6 +280,15 @@ class Scene:
         ":class:`FixedSmoothing`, :class:`ContactAwareSmoothing` or "
         ":class:`GaussianMatchedSmoothing`, each with its parameters; larger mu is smoother",
         default=ExactSmoothing(),
+    )
+    compliance: ComplianceSpec = key(
+        f"a mapping {{kind: one of {sorted(COMPLIANCE_KINDS)}, <the kind's parameters>}}",
+        "The contact law: :class:`~drake_abs.multibody.scene_entries.HardCompliance` (``kind: "
+        "hard``, the default, and when ``kind`` is left out: rigid contact) or "
+        ":class:`~drake_abs.multibody.scene_entries.MujocoCompliance` (``kind: mujoco``: "
+        "MuJoCo's soft contact from solref, solimp and margin, or the MJCF file's with "
+        "``from_model: true``; a larger timeconst is softer)",
+        default=HardCompliance(),
     )
     initial_state: InitialState = key(
         "a mapping {q: [...], v: [...]}",
@@ -392,6 +415,30 @@ class Scene:
                 at = f"initial_state.{part}"
                 raise _Problem(at, f"{at} must be a list of finite numbers")
         self._built_smoothing()  # its parameters checked now, not at the first step
+        self._check_compliance()
+
+    def _check_compliance(self) -> None:
+        """``_Problem`` for a soft-contact parameter out of its range."""
+        spec = self.compliance
+        if not isinstance(spec, MujocoCompliance):
+            return
+        for name, check in (("solref", check_solref), ("solimp", check_solimp)):
+            value = getattr(spec, name)
+            if value is not None:
+                try:
+                    check(np.array([value], dtype=float), f"compliance.{name}")
+                except ValueError as err:
+                    raise _Problem(f"compliance.{name}", str(err)) from None
+        if spec.margin is not None and not (np.isfinite(spec.margin) and spec.margin >= 0):
+            raise _Problem(
+                "compliance.margin",
+                f"compliance.margin must be a finite number >= 0 (m); got {spec.margin!r}",
+            )
+        if spec.impratio is not None and not (np.isfinite(spec.impratio) and spec.impratio > 0):
+            raise _Problem(
+                "compliance.impratio",
+                f"compliance.impratio must be a finite number > 0; got {spec.impratio!r}",
+            )
 
     def make_smoothing(self) -> Smoothing:
         """The smoothing object this scene names, at this scene's time step: when the
@@ -548,6 +595,7 @@ def _is_sequence(value) -> bool:
 
 
 _SCALARS = {
+    bool: (lambda v: isinstance(v, bool), bool),
     str: (lambda v: isinstance(v, str), str),
     float: (_is_number, float),
     int: (_is_integer, int),
@@ -655,7 +703,7 @@ def _plain_kind(value: Any, members: tuple[type, ...], key: str, form: str, tags
             raise _Problem(
                 key,
                 f"{key}: bad {key} parameters {parameters} for kind {kind!r}, which takes "
-                f"{own[member] or 'none'} (and {', '.join(common)})",
+                f"{own[member] or 'none'}" + (f" (and {', '.join(common)})" if common else ""),
             )
     plain = _plain_entry(given, member, key, form, tags)
     head = {"_tag": f"!{_reading_schema(member).__name__}"} if tags else {"kind": member.kind}

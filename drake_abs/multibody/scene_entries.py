@@ -162,3 +162,59 @@ class PairSpec:
     model_b: str | None = key(
         f"{_OPTIONAL_TEXT}: body b's model instance", "When its name is not unique", default=None
     )
+
+
+@documented
+@dataclass(frozen=True)
+class HardCompliance:
+    """``kind: hard``, the default: rigid contact (the hard complementarity step: no
+    penetration, no regulariser)."""
+
+    kind = "hard"
+
+
+_SOLREF = "[timeconst, dampratio] (s, both > 0) or [-stiffness, -damping] (both <= 0), or null"
+_SOLIMP = "[d0, dwidth, width, midpoint, power] (d0, dwidth, midpoint in [0, 1]; m; >= 1), or null"
+
+
+@documented
+@dataclass(frozen=True)
+class MujocoCompliance:
+    """``kind: mujoco``: MuJoCo's soft contact (solref, solimp, margin) as a regularised
+    complementarity problem (:mod:`drake_abs.contact.compliance`): each contact candidate acts
+    within its margin as a damped spring whose time constant is ``solref``'s and whose strength
+    is the impedance ``solimp`` gives; the step may end with a contact below the ground. A
+    larger timeconst and a smaller impedance are softer. Joint limits stay hard."""
+
+    kind = "mujoco"
+
+    from_model: bool = key(
+        "true or false",
+        "true: each candidate's solref, solimp, margin (the geoms' margins minus gaps) and "
+        "condim from its body's geom and the ground plane in the scene's MJCF file, mixed by "
+        "MuJoCo's rule (:mod:`drake_abs.multibody.mjcf_contact_parameters`), and the file's "
+        "impratio; the keys given below replace the file's",
+        default=False,
+    )
+    solref: tuple[float, float] | None = key(
+        _SOLREF, "Default: the file's (from_model) or MuJoCo's [0.02, 1]", default=None,
+        item="a number",
+    )  # fmt: skip
+    solimp: tuple[float, float, float, float, float] | None = key(
+        _SOLIMP, "Default: the file's (from_model) or MuJoCo's [0.9, 0.95, 0.001, 0.5, 2]",
+        default=None, item="a number",
+    )  # fmt: skip
+    margin: float | None = key(
+        "a number >= 0 (m), or null",
+        "A candidate has rows while its distance is at most this. Default: the file's "
+        "(from_model) or 0",
+        default=None,
+    )
+    impratio: float | None = key(
+        "a number > 0, or null", "MuJoCo's impratio. Default: the file's (from_model) or 1",
+        default=None,
+    )  # fmt: skip
+    refsafe: bool = key(
+        "true or false", "Raise timeconst to twice the time step, as MuJoCo does by default",
+        default=True,
+    )  # fmt: skip
