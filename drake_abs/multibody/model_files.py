@@ -16,11 +16,15 @@ does not build, are left out of the parsed text and returned by :func:`add_model
 MuJoCo (MJCF) files are parsed by Drake as published, except for what Drake drops and the step
 needs (:func:`read_mjcf`): ``<compiler settotalmass>`` (applied: the bodies' masses and inertias
 scaled), actuator effort limits (Drake keeps ``ctrlrange`` in control units while the actuation
-input is the joint torque: applied as ``gear * ctrlrange``, clipped by ``forcerange``), and
-``<keyframe>`` (applied on request). What neither Drake nor this package models (joint springs,
-dry joint friction, armature of an unactuated joint, tendons, equality constraints, actuators
-other than ``<motor>``) is refused, naming the element and attribute; the first three can be
-dropped explicitly (a scene's ``ignore``). :func:`model_report` lists what a built plant holds.
+input is the joint torque: applied as ``gear * ctrlrange``, clipped by ``forcerange``), joint
+springs (``stiffness`` towards ``springref`` on hinge and slide joints: added to the plant as
+Drake's ``RevoluteSpring`` / ``PrismaticSpring`` force elements, which the step takes implicitly,
+:func:`drake_abs.multibody.joint_limits.joint_springs`), and ``<keyframe>`` (applied on
+request). What neither Drake nor this package models (dry joint friction, armature of an
+unactuated joint, springs on ball and free joints, tendons, equality constraints, actuators other
+than ``<motor>``) is refused, naming the element and attribute; joint attributes can be dropped
+explicitly (a scene's ``ignore``: ``joint.stiffness`` drops the springs too).
+:func:`model_report` lists what a built plant holds.
 """
 
 from __future__ import annotations
@@ -40,7 +44,17 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import PackageMap, Parser
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import JointActuatorIndex, JointIndex, ModelInstanceIndex
+from pydrake.multibody.tree import (
+    JointActuatorIndex,
+    JointIndex,
+    ModelInstanceIndex,
+    PrismaticJoint,
+    PrismaticSpring,
+    RevoluteJoint,
+    RevoluteSpring,
+)
+
+from drake_abs.multibody.joint_limits import joint_springs
 
 _COLLISION = re.compile(r"<collision\b[^>]*?/>|<collision\b.*?</collision\s*>", re.DOTALL)
 _URDF_FILENAME = re.compile(r'(\bfilename\s*=\s*)(["\'])(.*?)\2')
@@ -314,6 +328,10 @@ class MjcfInfo:
         keyframes: ``{name: (qpos, qvel)}`` of the ``<keyframe>`` keys (unnamed keys by their
             index, ``"0"``, ``"1"``, ...; an absent qpos is None).
         dropped: what the scene's ``ignore`` dropped, one line each.
+        springs: ``(joint, stiffness, springref)`` of every hinge or slide joint with a
+            stiffness > 0 (N m / rad or N / m; springref in rad or m, converted from degrees
+            where ``<compiler angle="degree">``, MuJoCo's default), in file order; none when
+            ``joint.stiffness`` is ignored.
     """
 
     actuators: tuple[MjcfActuator, ...]
@@ -321,18 +339,21 @@ class MjcfInfo:
     joints: tuple[tuple[str, str, int], ...]
     keyframes: dict
     dropped: tuple[str, ...]
+    springs: tuple[tuple[str, float, float], ...] = ()
 
 
 _QPOS_SIZE = {"free": 7, "ball": 4, "slide": 1, "hinge": 1}
 
 
 def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
-    """Read what Drake's MJCF parser drops from the file at ``path``, and refuse what neither it
-    nor the step models (``ValueError`` naming each element and attribute): a joint's
-    ``stiffness`` (a spring), ``frictionloss`` (dry friction) or ``armature`` on a joint with no
-    motor (Drake keeps armature only as a motor's reflected inertia), unless ``ignore`` lists
-    ``"joint.stiffness"``, ``"joint.frictionloss"`` or ``"joint.armature"`` (they are then
-    dropped, and listed in ``dropped``); actuators other than ``<motor>`` on a joint, a
+    """Read what Drake's MJCF parser drops from the file at ``path`` (motors' effort limits,
+    ``settotalmass``, keyframes, the joints' springs: ``stiffness`` towards ``springref``), and
+    refuse what neither it nor the step models (``ValueError`` naming each element and
+    attribute): a joint's ``frictionloss`` (dry friction), ``armature`` on a joint with no motor
+    (Drake keeps armature only as a motor's reflected inertia) or ``stiffness`` on a ball or free
+    joint, unless ``ignore`` lists ``"joint.frictionloss"``, ``"joint.armature"`` or
+    ``"joint.stiffness"`` (they are then dropped, and listed in ``dropped``;
+    ``"joint.stiffness"`` drops every spring); actuators other than ``<motor>`` on a joint, a
     multi-component ``gear``, asymmetric ``ctrlrange`` or ``forcerange``, tendons and equality
     constraints, always."""
     path = Path(path)
@@ -345,6 +366,7 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
     defaults = _MjcfDefaults(root)
     compiler = {k: v for c in root.findall("compiler") for k, v in c.attrib.items()}
     autolimits = compiler.get("autolimits", "true") == "true"
+    degrees = compiler.get("angle", "degree") == "degree"  # MuJoCo's default unit of angles
     problems: list[tuple[str | None, str]] = []  # (ignore key or None: always refused, what)
 
     actuators, actuated = [], set()
@@ -380,7 +402,7 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
             actuators.append(MjcfActuator(name, joint, gear[0], abs(gear[0]) * limit))
             actuated.add(joint)
 
-    joints = []
+    joints, springs = [], []
     parents = {child: parent for parent in root.iter() for child in parent}
     for world in root.findall("worldbody"):
         for body in world.iter("body"):
@@ -402,8 +424,21 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
                     (name if kind != "free" else body.get("name"), kind, _QPOS_SIZE[kind])
                 )
                 where = f"joint {name!r}"
+                stiffness = _floats(defaults.get(joint, "joint", cls, "stiffness"),
+                                    f"{where} stiffness")  # fmt: skip
+                if stiffness and stiffness[0] != 0:
+                    if stiffness[0] < 0 or kind not in ("hinge", "slide"):
+                        problems.append(("joint.stiffness", f"{where}: stiffness={stiffness[0]:g} "
+                                         f"(a spring on a {kind} joint; springs on hinge and "
+                                         "slide joints only, stiffness >= 0)"))  # fmt: skip
+                    else:
+                        ref = _floats(defaults.get(joint, "joint", cls, "springref") or "0",
+                                      f"{where} springref")  # fmt: skip
+                        ref = ref[0] if ref else 0.0
+                        if kind == "hinge" and degrees:
+                            ref = float(np.deg2rad(ref))
+                        springs.append((name, float(stiffness[0]), float(ref)))
                 for attr, key, what in (
-                    ("stiffness", "joint.stiffness", "a joint spring"),
                     ("frictionloss", "joint.frictionloss", "dry joint friction"),
                     ("armature", "joint.armature", "armature of a joint no motor drives"),
                 ):
@@ -442,7 +477,10 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
     if total is not None and float(total) > 0:  # MuJoCo: a value <= 0 leaves the masses
         total_mass = float(total)
     dropped = tuple(what for key, what in problems if key in ignore)
-    return MjcfInfo(tuple(actuators), total_mass, tuple(joints), keyframes, dropped)
+    if "joint.stiffness" in ignore:
+        dropped += tuple(f"joint {n!r}: stiffness={k:g} (a joint spring)" for n, k, _ in springs)
+        springs = []
+    return MjcfInfo(tuple(actuators), total_mass, tuple(joints), keyframes, dropped, tuple(springs))
 
 
 def _mjcf_with_total_mass(path: Path, total_mass: float) -> str:
@@ -520,9 +558,10 @@ def apply_mjcf(
 ) -> None:
     """Apply to the model ``instance`` parsed (not finalized) from an MJCF file what Drake's
     parser drops (see :func:`read_mjcf`): each motor's effort limit as a joint torque (``gear``
-    times ``ctrlrange``, clipped by ``forcerange``), and the joint positions of the keyframe
-    named ``keyframe`` (hinge and slide joints by name; a free body's ``(x, y, z, qw, qx, qy,
-    qz)`` as its default pose)."""
+    times ``ctrlrange``, clipped by ``forcerange``), each joint spring as a ``RevoluteSpring``
+    (hinge) or ``PrismaticSpring`` (slide) force element, and the joint positions of the
+    keyframe named ``keyframe`` (hinge and slide joints by name; a free body's ``(x, y, z, qw,
+    qx, qy, qz)`` as its default pose)."""
     drake_actuators = [
         plant.get_joint_actuator(i)
         for i in plant.GetJointActuatorIndices()  # (per instance only once finalized)
@@ -540,6 +579,17 @@ def apply_mjcf(
                 f"file's motor {motor.name!r} drives {motor.joint!r}"
             )
         actuator.set_effort_limit(motor.effort_limit)
+    for name, stiffness, reference in info.springs:
+        joint = plant.GetJointByName(name, instance)
+        if isinstance(joint, RevoluteJoint):
+            plant.AddForceElement(RevoluteSpring(joint, reference, stiffness))
+        elif isinstance(joint, PrismaticJoint):
+            plant.AddForceElement(PrismaticSpring(joint, reference, stiffness))
+        else:
+            raise ValueError(
+                f"{where}: joint {name!r} has a spring but Drake built it as a "
+                f"{type(joint).__name__} (expected a RevoluteJoint or PrismaticJoint)"
+            )
     if keyframe is None:
         return
     if keyframe not in info.keyframes:
@@ -580,11 +630,14 @@ def apply_mjcf(
 
 def model_report(plant: MultibodyPlant) -> dict:
     """What a finalized plant holds of its model files, as the step uses it: per joint with
-    degrees of freedom ``{name, type, q_index, v_index, lower, upper, damping, armature}``
-    (limits and damping of its first degree of freedom; armature: the reflected inertia of the
-    actuators on it, kg m^2 or kg) and per actuator ``{name, joint, gear, rotor_inertia,
-    reflected_inertia, effort_limit}`` (the effort limit a joint torque or force, N m or N),
-    and the total mass (kg)."""
+    degrees of freedom ``{name, type, q_index, v_index, lower, upper, damping, armature,
+    stiffness, springref}`` (limits, damping and spring of its first degree of freedom;
+    armature: the reflected inertia of the actuators on it, kg m^2 or kg; stiffness in N m / rad
+    or N / m towards springref in rad or m, from the plant's joint springs,
+    :func:`~drake_abs.multibody.joint_limits.joint_springs`) and per actuator ``{name, joint,
+    gear, rotor_inertia, reflected_inertia, effort_limit}`` (the effort limit a joint torque or
+    force, N m or N), and the total mass (kg)."""
+    springs = joint_springs(plant)
     reflected = {}
     actuators = []
     for i in plant.GetJointActuatorIndices():
@@ -617,6 +670,8 @@ def model_report(plant: MultibodyPlant) -> dict:
                 "upper": float(j.position_upper_limits()[0]),
                 "damping": float(j.default_damping_vector()[0]),
                 "armature": reflected.get(j.name(), 0.0),
+                "stiffness": float(springs.stiffness[j.velocity_start()]),
+                "springref": float(springs.reference[j.velocity_start()]),
             }
         )
     mass = plant.CalcTotalMass(plant.CreateDefaultContext())
@@ -627,11 +682,13 @@ def format_model_report(report: dict) -> str:
     """:func:`model_report` as a text table."""
     lines = [f"total mass {report['mass']:.6g} kg", "joints:"]
     lines.append(f"  {'name':24s} {'type':20s} {'q':>3s} {'v':>3s} {'lower':>10s} {'upper':>10s} "
-                 f"{'damping':>9s} {'armature':>9s}")  # fmt: skip
+                 f"{'damping':>9s} {'armature':>9s} {'stiffness':>9s} "
+                 f"{'springref':>9s}")  # fmt: skip
     for j in report["joints"]:
         lines.append(
             f"  {j['name']:24s} {j['type']:20s} {j['q_index']:3d} {j['v_index']:3d} "
-            f"{j['lower']:10.4g} {j['upper']:10.4g} {j['damping']:9.4g} {j['armature']:9.4g}"
+            f"{j['lower']:10.4g} {j['upper']:10.4g} {j['damping']:9.4g} {j['armature']:9.4g} "
+            f"{j['stiffness']:9.4g} {j['springref']:9.4g}"
         )
     lines.append("actuators:")
     lines.append(f"  {'name':24s} {'joint':24s} {'gear':>8s} {'effort limit':>13s}")

@@ -22,14 +22,19 @@ from drake_abs._validation import batch_of_states
 from drake_abs.contact.compliance import ContactCompliance
 from drake_abs.contact.cone import FORMULATIONS, FrictionCone
 from drake_abs.contact.contact_lcp import contact_step
-from drake_abs.contact.damping import damped_parameters
+from drake_abs.contact.damping import JointSprings, damped_parameters, effective_damping
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, Smoothing
 from drake_abs.contact.step import Step
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 from drake_abs.multibody.drake_dynamics import ContactModelBase
 from drake_abs.multibody.floating import normalize_quaternions
-from drake_abs.multibody.joint_limits import JointLimitRows, effort_limits, joint_damping
+from drake_abs.multibody.joint_limits import (
+    JointLimitRows,
+    effort_limits,
+    joint_damping,
+    joint_springs,
+)
 from drake_abs.multibody.parameters import (
     damping_columns,
     damping_joints,
@@ -53,7 +58,8 @@ class ContactProblem:
 
     Attributes:
         quantities: the step's :class:`~drake_abs.contact.step_data.StepQuantities` (no
-            state derivatives): W and v_free of the damped step, distances ``phi`` (m) and
+            state derivatives): W and v_free of the damped step (joint damping and springs
+            taken implicitly), distances ``phi`` (m) and
             rows ``Jn`` of the ``n_contacts`` candidates followed by the joint-limit rows,
             tangent rows ``Jt``.
         cone: the friction cone over those rows (joint-limit rows frictionless).
@@ -96,6 +102,10 @@ class ComplementarityStepper:
             :mod:`drake_abs.multibody.joint_limits`.
         damping: apply the plant's joint damping, implicitly (stable at any h; see
             :mod:`drake_abs.contact.damping`).
+        springs: apply the plant's joint springs (its ``RevoluteSpring`` and
+            ``PrismaticSpring`` force elements: an MJCF joint's ``stiffness``, an SDF joint's
+            ``spring_stiffness``; :func:`~drake_abs.multibody.joint_limits.joint_springs`),
+            implicitly like the damping (:mod:`drake_abs.contact.damping`).
         compliance: soft contact as MuJoCo's (solref, solimp, margin per candidate;
             :class:`~drake_abs.contact.compliance.ContactCompliance`), or None (default) for
             hard contact. A soft candidate has rows only while its distance is at most its
@@ -112,6 +122,7 @@ class ComplementarityStepper:
         friction: str = "stewart_trinkle",
         joint_limits: bool = True,
         damping: bool = True,
+        springs: bool = True,
         compliance: ContactCompliance | None = None,
         **solver_options,
     ):
@@ -127,11 +138,16 @@ class ComplementarityStepper:
         plant = model.plant
         self.limits = JointLimitRows.of(plant if joint_limits else None)
         self.effort = effort_limits(plant) if joint_limits else np.full(model.nu, np.inf)
-        self.damping = joint_damping(plant) if damping else np.zeros(model.nv)
         self._clips = bool(np.isfinite(self.effort).any())  # per-step work only where needed
-        self._damps = bool(self.damping.any())
-        self._damping = self.damping if self._damps else None  # passed to the provider
-        self._flags = {"joint_limits": bool(joint_limits), "damping": bool(damping)}
+        self._set_joint_terms(
+            joint_damping(plant) if damping else np.zeros(model.nv),
+            joint_springs(plant) if springs else JointSprings.none(model.nv),
+        )
+        self._flags = {
+            "joint_limits": bool(joint_limits),
+            "damping": bool(damping),
+            "springs": bool(springs),
+        }
         if compliance is not None and compliance.size != len(model.contacts):
             raise ValueError(
                 f"compliance must have one entry per contact candidate ({len(model.contacts)}); "
@@ -149,6 +165,14 @@ class ComplementarityStepper:
         #: the model parameters :meth:`with_parameters` changed from the scene's, ``{name:
         #: value}`` (pickled with the settings)
         self._parameters: dict[str, float] = {}
+
+    def _set_joint_terms(self, damping: np.ndarray, springs: JointSprings) -> None:
+        """Hold the joint damping (nv,) and springs, and what the provider is passed of them
+        (None where all are 0)."""
+        self.damping, self.springs = damping, springs
+        self._damps = bool(damping.any()) or springs.active  # the step's W, v_free move
+        self._damping = damping if damping.any() else None  # passed to the provider
+        self._springs = springs if springs.active else None
 
     def __copy__(self) -> ComplementarityStepper:
         """A shallow copy (the same contact model), for :meth:`with_smoothing` and
@@ -204,13 +228,17 @@ class ComplementarityStepper:
           (m^2) for every body with a mass: the entries of its rotational inertia about its
           centre of mass, in its body frame, per unit mass (the rotational inertia is the mass
           times this, so a mass column keeps this held; a product column moves both symmetric
-          entries of the matrix; Drake's sign convention, the matrix entries). These come last,
-          so the columns before them keep their indices.
+          entries of the matrix; Drake's sign convention, the matrix entries). These come after
+          the offsets, so the columns before them keep their indices;
+        - ``"stiffness[joint]"`` (N m / rad or N / m), then ``"springref[joint]"`` (rad or m),
+          for every one-velocity joint, when this stepper applies joint springs
+          (``springs=True``), also where the stiffness is 0: the joint springs (taken
+          implicitly, :mod:`drake_abs.contact.damping`). These come last.
 
         :meth:`with_parameters` gives a stepper with other values of any of them
         (:mod:`drake_abs.multibody.parameters`).
         """
-        return parameter_names(self.model, self._damping_joints)
+        return parameter_names(self.model, self._damping_joints, self._spring_joints)
 
     @functools.cached_property
     def _damping_joints(self) -> tuple[tuple[str, int], ...]:
@@ -218,6 +246,15 @@ class ComplementarityStepper:
         (none when this stepper does not apply damping). A name that occurs in several model
         instances is qualified as ``"instance::joint"``."""
         return damping_joints(self.model.plant) if self._flags["damping"] else ()
+
+    @functools.cached_property
+    def _spring_joints(self) -> tuple[tuple[str, int], ...]:
+        """``(name, velocity index)`` of every one-velocity joint with a position coordinate,
+        the joint-spring parameters (none when this stepper does not apply springs)."""
+        if not self._flags["springs"]:
+            return ()
+        q_index = self.springs.q_index
+        return tuple((n, v) for n, v in damping_joints(self.model.plant) if q_index[v] >= 0)
 
     def with_smoothing(self, smoothing: Smoothing) -> ComplementarityStepper:
         """The same stepper with another smoothing (larger mu: more smoothing)."""
@@ -232,9 +269,12 @@ class ComplementarityStepper:
         height (m), the friction coefficients (dimensionless), the masses (kg), the point
         candidates' radii (m), the joint damping (N m s / rad or N s / m), the point
         candidates' offsets (m), the bodies' unit rotational inertias about their centres of
-        mass (m^2). The masses and inertias are those the dynamics use (the plant's defaults,
-        or those :meth:`with_parameters` set)."""
-        return parameter_values(self.model, self.damping, self._damping_joints)
+        mass (m^2), the joint springs' stiffness (N m / rad or N / m) and reference (rad or m).
+        The masses and inertias are those the dynamics use (the plant's defaults, or those
+        :meth:`with_parameters` set)."""
+        return parameter_values(
+            self.model, self.damping, self._damping_joints, self.springs, self._spring_joints
+        )
 
     def with_parameters(self, values: np.ndarray | Mapping[str, float]) -> ComplementarityStepper:
         """A stepper whose :meth:`parameter_values` are ``values`` (this one is left as it is):
@@ -243,31 +283,32 @@ class ComplementarityStepper:
         its Jacobians: the ground height, each candidate's friction coefficient, each body's
         mass (centre of mass and unit inertia held, so its rotational inertia scales with it,
         as ``RigidBody.SetMass`` does) and unit inertia, each point candidate's radius and
-        offset, each joint's damping. The plant is shared (its default inertias cannot change
-        once finalized): the contact model is rebuilt on it with the bodies' inertias as
-        overrides (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.rebuilt`), no
-        model file is read. A stepper built from a scene stays picklable: it is sent as the
+        offset, each joint's damping and spring. The plant is shared (its default inertias
+        cannot change once finalized): the contact model is rebuilt on it with the bodies'
+        inertias as overrides
+        (:meth:`~drake_abs.multibody.drake_dynamics.ContactModelBase.rebuilt`), no model file
+        is read. A stepper built from a scene stays picklable: it is sent as the
         scene, its settings and the parameters changed.
 
         Raises:
             ValueError: for an array of another length, an unknown name, a value that is not a
-                finite number, a mass <= 0, a negative radius, friction coefficient or damping,
+                finite number, a mass <= 0, a negative radius, friction coefficient, damping or
+                stiffness,
                 or a unit inertia that is not physically valid (its moments must satisfy the
                 triangle inequality).
         """
         names = self.parameter_names
         current = self.parameter_values()
         new = parameter_vector(values, names, current)
-        model, damping, changed = with_values(
-            self.model, self.damping, self._damping_joints, names, new, current
-        )
+        model, damping, springs, changed = with_values(
+            self.model, self.damping, self._damping_joints, names, new, current,
+            self.springs, self._spring_joints,
+        )  # fmt: skip
         other = copy.copy(self)
         other.__dict__.pop("_cones", None)  # friction cones of this model
         other.model = model
         other.solver_options = dict(self.solver_options)
-        other.damping = damping
-        other._damps = bool(damping.any())
-        other._damping = damping if other._damps else None
+        other._set_joint_terms(damping, springs)
         other._parameters = {**self._parameters, **changed}
         return other
 
@@ -316,8 +357,9 @@ class ComplementarityStepper:
         groups = None  # (rows, active contact indices, quantities or None) per active set
         if B == 1 and pruned and not soft:  # one state: the provider shares kinematics
             idx, quant = self.model.quantities_within(
-                q, v, u, self.activation_distance, derivatives=jacobians, damping=self._damping
-            )
+                q, v, u, self.activation_distance, derivatives=jacobians, damping=self._damping,
+                springs=self._springs,
+            )  # fmt: skip
             active = np.zeros((1, nc), dtype=bool)
             active[0, idx] = True
             groups = [(slice(None), idx, quant)]
@@ -392,7 +434,9 @@ class ComplementarityStepper:
         q, v = x[:, :nq], x[:, nq:]
         idx = np.arange(nc)
         lidx = np.arange(self.limits.size)
-        quant = self.model.quantities(q, v, u, idx, derivatives=False, damping=self._damping)
+        quant = self.model.quantities(
+            q, v, u, idx, derivatives=False, damping=self._damping, springs=self._springs
+        )
         cone = self._cone(idx, lidx.size)
         names = parameter_columns(parameters, lambda: self.parameter_names)
         par = parameter_derivatives(self.model, idx, cone, q, v, u, names) if names else None
@@ -418,8 +462,9 @@ class ComplementarityStepper:
         """One group's quantities with the joint-limit rows ``lidx`` appended to the contact
         rows (frictionless; their distances and rows do not depend on the model parameters),
         and the model-parameter derivatives (columns ``names``) carried to the damped step (the
-        provider took the joint damping: ``quantities(..., damping=...)``), with the damping's
-        own columns (:func:`~drake_abs.multibody.parameters.damping_columns`)."""
+        provider took the joint damping and springs: ``quantities(..., damping=...,
+        springs=...)``), with the damping's and springs' own columns
+        (:func:`~drake_abs.multibody.parameters.damping_columns`)."""
         if lidx.size:
             P = quant.dphi.shape[-1] if jacobians else None
             phi, J, dphi, dJ = self.limits.rows(q, lidx, self.sizes[1], P)
@@ -442,9 +487,14 @@ class ComplementarityStepper:
                 par = replace(par, **padded)
         if par is None:
             return quant, par
+        h = self.model.h
         if self._damps:  # the provider took the damping (quantities): carry theta's to it
-            par = damped_parameters(par, quant.W, quant.v_free, self.damping, self.model.h)
-        return quant, damping_columns(par, quant, names, self._damping_joints, self.model.h)
+            D = effective_damping(self.damping, self._springs, self.sizes[1], h)
+            tau_k = None if self._springs is None else self._springs.torque(q)
+            par = damped_parameters(par, quant.W, quant.v_free, D, h, tau_k)
+        return quant, damping_columns(
+            par, quant, names, self._damping_joints, h, self.springs, self._spring_joints
+        )
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: tuple) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
@@ -479,8 +529,9 @@ class ComplementarityStepper:
             )
             if quant is None:
                 quant = self.model.quantities(
-                    q[rows], v[rows], u[rows], idx, derivatives=jacobians, damping=self._damping
-                )
+                    q[rows], v[rows], u[rows], idx, derivatives=jacobians, damping=self._damping,
+                    springs=self._springs,
+                )  # fmt: skip
             cone = self._cone(idx, lidx.size)
             par = None
             if parameters:
