@@ -15,13 +15,16 @@ The file's keys::
 and the action of an observation ``o`` (gymnasium v5's default observation of the environment,
 what ``env.step`` returns), with ``z = (o - obs_mean) / obs_std``::
 
-    linear:  a = clip(W z + b, low, high)
+    linear:  a = clip(g(W z + b), low, high)
     MLP:     h_0 = z,  h_i = f(W_{i-1} h_{i-1} + b_{i-1})  (i = 1 .. L-1, f the activation),
-             a = clip(W_{L-1} h_{L-1} + b_{L-1}, low, high)
+             a = clip(g(W_{L-1} h_{L-1} + b_{L-1}), low, high)
 
-(the last layer is linear), clipped to the environment's action space ``[low, high]``
-(gymnasium's MuJoCo locomotion tasks Hopper, HalfCheetah, Walker2d and Ant act in [-1, 1]).
-A policy without observation normalisation has ``obs_mean = 0``, ``obs_std = 1``.
+clipped to the environment's action space ``[low, high]`` (gymnasium's MuJoCo locomotion tasks
+Hopper, HalfCheetah, Walker2d and Ant act in [-1, 1]). ``g`` is the identity (the last layer is
+linear) unless the file has the optional key ``output_activation``, a 0-d string naming one of
+ACTIVATIONS (for a linear policy or an MLP): ``"tanh"`` is the deterministic action of a policy
+squashed by tanh, e.g. SAC's ``tanh(mean)``. A policy without observation normalisation has
+``obs_mean = 0``, ``obs_std = 1``.
 
 Any other key is metadata: a 0-d array holding a string, a whole number, a real number or a
 bool. The ones this package writes (:data:`METADATA_KEYS`): ``env_id``, ``method``, ``seed``,
@@ -67,8 +70,8 @@ def _elu_derivative(z: np.ndarray) -> np.ndarray:
     return np.where(z > 0, 1.0, np.exp(np.minimum(z, 0.0)))
 
 
-#: The hidden layers' activations an MLP file may name: name -> (f(z), f'(z)), elementwise.
-#: ``elu`` has alpha = 1; ``sigmoid`` is 1 / (1 + exp(-z)).
+#: The hidden layers' activations an MLP file may name, each name with (f(z), f'(z)),
+#: elementwise; ``elu`` has alpha = 1, ``sigmoid`` is 1 / (1 + exp(-z)).
 ACTIVATIONS: Mapping[str, tuple[Callable, Callable]] = MappingProxyType({
     "tanh": (np.tanh, lambda z: 1.0 - np.tanh(z) ** 2),
     "relu": (lambda z: np.maximum(z, 0.0), lambda z: (z > 0).astype(float)),
@@ -89,6 +92,7 @@ METADATA_KEYS: Mapping[str, str] = MappingProxyType({
 })  # fmt: skip
 
 _NORMALISER = ("obs_mean", "obs_std")
+_ACTIVATION_KEYS = ("activation", "output_activation")
 _LAYER_KEY = re.compile(r"^([Wb])(\d*)$")
 
 
@@ -144,6 +148,9 @@ class PolicyFile:
         activation: the hidden layers' activation (a key of :data:`ACTIVATIONS`) for an MLP;
             None for a linear policy (then exactly one layer, stored as ``W``, ``b``).
         metadata: the file's other keys, each a str, int, float or bool.
+        output_activation: g, applied to the last layer's output before the clip (a key of
+            :data:`ACTIVATIONS`, e.g. ``"tanh"``); None (or ``"identity"``, stored as None):
+            the last layer is linear, and the file has no ``output_activation`` key.
 
     Build one with :meth:`linear` or :meth:`mlp` (``ValueError`` naming the bad array).
     """
@@ -154,9 +161,17 @@ class PolicyFile:
     obs_std: np.ndarray
     activation: str | None = None
     metadata: Mapping[str, str | int | float | bool] = field(default_factory=dict)
+    output_activation: str | None = None
 
     def __post_init__(self):
         weights, biases = tuple(self.weights), tuple(self.biases)
+        if self.output_activation is not None and self.output_activation not in ACTIVATIONS:
+            raise ValueError(
+                f"output_activation must be None or one of {sorted(ACTIVATIONS)}; got "
+                f"{self.output_activation!r}"
+            )
+        if self.output_activation == "identity":
+            object.__setattr__(self, "output_activation", None)
         linear = self.activation is None
         if not weights or len(weights) != len(biases):
             raise ValueError(
@@ -203,7 +218,7 @@ class PolicyFile:
         for key, value in dict(self.metadata).items():
             if not isinstance(key, str) or not key:
                 raise ValueError(f"metadata keys must be non-empty strings; got {key!r}")
-            if _LAYER_KEY.match(key) or key in (*_NORMALISER, "activation"):
+            if _LAYER_KEY.match(key) or key in (*_NORMALISER, *_ACTIVATION_KEYS):
                 raise ValueError(
                     f"metadata key {key!r} is a key of the format itself (a layer, the "
                     "normaliser or the activation), not metadata"
@@ -218,20 +233,33 @@ class PolicyFile:
     # ------------------------------------------------------------------------------- building
 
     @classmethod
-    def linear(cls, W, b, obs_mean=None, obs_std=None, **metadata) -> PolicyFile:
-        """A linear policy ``a = clip(W (o - obs_mean) / obs_std + b)``; obs_mean 0 and
-        obs_std 1 by default (no normalisation); ``metadata`` as keyword arguments."""
+    def linear(
+        cls, W, b, obs_mean=None, obs_std=None, *, output_activation=None, **metadata
+    ) -> PolicyFile:
+        """A linear policy ``a = clip(g(W (o - obs_mean) / obs_std + b))``; obs_mean 0 and
+        obs_std 1 by default (no normalisation); g the ``output_activation`` (default None,
+        the identity); ``metadata`` as keyword arguments."""
         W = np.asarray(W)
         n_obs = W.shape[1] if W.ndim == 2 else 0
         return cls(
             (W,), (b,), np.zeros(n_obs) if obs_mean is None else obs_mean,
-            np.ones(n_obs) if obs_std is None else obs_std, None, metadata,
+            np.ones(n_obs) if obs_std is None else obs_std, None, metadata, output_activation,
         )  # fmt: skip
 
     @classmethod
-    def mlp(cls, layers, activation: str, obs_mean=None, obs_std=None, **metadata) -> PolicyFile:
+    def mlp(
+        cls,
+        layers,
+        activation: str,
+        obs_mean=None,
+        obs_std=None,
+        *,
+        output_activation=None,
+        **metadata,
+    ) -> PolicyFile:
         """An MLP of ``layers`` = [(W0, b0), (W1, b1), ...] with ``activation`` on the hidden
-        layers (the last layer linear); normaliser and metadata as :meth:`linear`."""
+        layers (the last layer linear, then ``output_activation``); normaliser, output
+        activation and metadata as :meth:`linear`."""
         layers = list(layers)
         if not layers or any(len(layer) != 2 for layer in layers):
             raise ValueError("layers must be a non-empty list of (W, b) pairs")
@@ -241,6 +269,7 @@ class PolicyFile:
             tuple(W for W, _ in layers), tuple(b for _, b in layers),
             np.zeros(n_obs) if obs_mean is None else obs_mean,
             np.ones(n_obs) if obs_std is None else obs_std, activation, metadata,
+            output_activation,
         )  # fmt: skip
 
     # ---------------------------------------------------------------------------- properties
@@ -270,8 +299,9 @@ class PolicyFile:
         sizes = " -> ".join(str(n) for n in (self.n_obs, *self.hidden, self.nu))
         normalised = not (np.all(self.obs_mean == 0) and np.all(self.obs_std == 1))
         what = "linear" if self.activation is None else f"MLP ({self.activation})"
-        return f"{what}, {sizes}, " + ("normalised observation" if normalised else
-                                       "no observation normalisation")  # fmt: skip
+        squash = "" if self.output_activation is None else f"{self.output_activation} output, "
+        return f"{what}, {sizes}, {squash}" + ("normalised observation" if normalised else
+                                               "no observation normalisation")  # fmt: skip
 
     # ---------------------------------------------------------------------------- evaluation
 
@@ -286,7 +316,8 @@ class PolicyFile:
         return (o[None] if single else o), single
 
     def _forward(self, o: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-        """(pre-activations of the hidden layers, the last layer's output (M, nu))."""
+        """(pre-activations of the hidden layers, the last layer's output (M, nu) before the
+        output activation)."""
         h = (o - self.obs_mean) / self.obs_std
         pre = []
         if self.activation is not None:
@@ -297,10 +328,12 @@ class PolicyFile:
         return pre, h @ self.weights[-1].T + self.biases[-1]
 
     def output(self, obs) -> np.ndarray:
-        """The last layer's output before clipping: (nu,) for obs (n_obs,), (M, nu) for
+        """The output before clipping, ``g(last layer)``: (nu,) for obs (n_obs,), (M, nu) for
         (M, n_obs)."""
         o, single = self._obs(obs)
         out = self._forward(o)[1]
+        if self.output_activation is not None:
+            out = ACTIVATIONS[self.output_activation][0](out)
         return out[0] if single else out
 
     def act(self, obs, low=-1.0, high=1.0) -> np.ndarray:
@@ -314,7 +347,9 @@ class PolicyFile:
         rule backwards through the layers and the normaliser."""
         o, _ = self._obs(obs)
         g = np.asarray(g_out, dtype=float).reshape(o.shape[0], self.nu)
-        pre, _ = self._forward(o)
+        pre, last = self._forward(o)
+        if self.output_activation is not None:
+            g = g * ACTIVATIONS[self.output_activation][1](last)
         g = g @ self.weights[-1]
         if self.activation is not None:
             df = ACTIVATIONS[self.activation][1]
@@ -334,6 +369,8 @@ class PolicyFile:
                 out[f"W{i}"], out[f"b{i}"] = W, b
             out["activation"] = np.array(self.activation)
         out |= {"obs_mean": self.obs_mean, "obs_std": self.obs_std}
+        if self.output_activation is not None:
+            out["output_activation"] = np.array(self.output_activation)
         return out | {key: np.array(value) for key, value in self.metadata.items()}
 
     def save(self, path: str | Path) -> Path:
@@ -351,7 +388,8 @@ class PolicyFile:
     def from_arrays(cls, arrays: Mapping[str, np.ndarray], source: str = "arrays") -> PolicyFile:
         """Read a policy from a file's arrays (``ValueError`` naming ``source`` and the bad key:
         no layers, a gap in the layers, a shape that does not chain, a missing normaliser or
-        activation, metadata that is not a 0-d string or number)."""
+        activation, an output activation that is not a 0-d string of ACTIVATIONS, metadata that
+        is not a 0-d string or number)."""
         try:
             return cls._from_arrays(arrays)
         except ValueError as err:
@@ -366,7 +404,7 @@ class PolicyFile:
             if match:
                 letter, index = match.groups()
                 layers[letter][int(index) if index else None] = value
-            elif key not in (*_NORMALISER, "activation"):
+            elif key not in (*_NORMALISER, *_ACTIVATION_KEYS):
                 metadata[key] = value
         for key in _NORMALISER:
             if key not in arrays:
@@ -374,6 +412,15 @@ class PolicyFile:
                     f"no {key!r}: a policy file holds obs_mean and obs_std (n_obs,) (0 and 1 for "
                     "a policy without observation normalisation)"
                 )
+        output_activation = None
+        if "output_activation" in arrays:
+            value = np.asarray(arrays["output_activation"])
+            if value.ndim != 0 or value.dtype.kind != "U" or str(value) not in ACTIVATIONS:
+                raise ValueError(
+                    f"output_activation must be a 0-d string array, one of {sorted(ACTIVATIONS)}; "
+                    f"got {value!r}"
+                )
+            output_activation = str(value)
         Ws, bs = layers["W"], layers["b"]
         if None in Ws or None in bs:  # a linear policy: W, b
             if set(Ws) | set(bs) != {None}:
@@ -389,7 +436,7 @@ class PolicyFile:
                     "'activation' belongs to an MLP (W0, b0, ...); a linear policy (W, b) has none"
                 )
             return cls((arrays["W"],), (arrays["b"],), arrays["obs_mean"], arrays["obs_std"],
-                       None, metadata)  # fmt: skip
+                       None, metadata, output_activation)  # fmt: skip
         if not Ws:
             raise ValueError(
                 "no layers: a policy file holds W, b (linear) or W0, b0, W1, b1, ... (an MLP); "
@@ -415,7 +462,7 @@ class PolicyFile:
             )
         return cls(
             tuple(Ws[i] for i in range(count)), tuple(bs[i] for i in range(count)),
-            arrays["obs_mean"], arrays["obs_std"], str(activation), metadata,
+            arrays["obs_mean"], arrays["obs_std"], str(activation), metadata, output_activation,
         )  # fmt: skip
 
 
@@ -551,7 +598,7 @@ class FilePolicy:
 
     @property
     def n_params(self) -> int:
-        """0: a file's policy is fixed."""
+        """Always 0 (a file's policy has no parameters)."""
         return 0
 
     def _check(self, theta, x) -> np.ndarray:
