@@ -276,3 +276,65 @@ def test_file_policy_checks_theta_and_bounds(rng):
         FilePolicy(_linear(rng), 1.0, -1.0)
     with pytest.raises(ValueError, match=r"low must be a scalar or have shape \(nu,\) = \(3,\)"):
         FilePolicy(_linear(rng), np.zeros(2), 1.0)
+
+
+# ------------------------------------------------------------------- an output activation (tanh)
+
+
+@pytest.mark.parametrize("kind", ["linear", "mlp"])
+def test_a_tanh_output_is_applied_before_the_clip_and_kept_on_disk(kind, rng, tmp_path):
+    plain = _linear(rng) if kind == "linear" else _mlp(rng, "relu")
+    layers = list(zip(plain.weights, plain.biases, strict=True))
+    file = (
+        PolicyFile.linear(*layers[0], plain.obs_mean, plain.obs_std, output_activation="tanh",
+                          seed=1)
+        if kind == "linear" else
+        PolicyFile.mlp(layers, "relu", plain.obs_mean, plain.obs_std, output_activation="tanh",
+                       seed=1)
+    )  # fmt: skip
+    obs = 3.0 * rng.standard_normal((30, file.n_obs))
+    last = plain.output(obs)  # the same layers without g
+    np.testing.assert_allclose(file.output(obs), np.tanh(last), rtol=0, atol=1e-15)
+    low, high = -0.5, 0.5  # tanh keeps (-1, 1): a tighter action space still clips
+    np.testing.assert_allclose(file.act(obs, low, high), np.clip(np.tanh(last), low, high),
+                               rtol=0, atol=1e-15)  # fmt: skip
+    assert np.any(np.abs(np.tanh(last)) > 0.5) and np.any(np.abs(last) > 1.0)
+    assert "tanh output" in file.describe()
+    path = file.save(tmp_path / "sac.npz")
+    with np.load(path) as raw:
+        assert str(raw["output_activation"]) == "tanh" and raw["output_activation"].shape == ()
+    back = load_policy_file(path)
+    assert back.output_activation == "tanh" and dict(back.metadata) == {"seed": 1}
+    np.testing.assert_array_equal(back.act(obs), file.act(obs))
+
+
+def test_an_identity_output_is_no_key_at_all(rng, tmp_path):
+    file = PolicyFile.linear(np.ones((2, 3)), np.zeros(2), output_activation="identity")
+    assert file.output_activation is None
+    with np.load(file.save(tmp_path / "p.npz")) as raw:
+        assert "output_activation" not in raw.files
+
+
+def test_a_bad_output_activation_is_refused_naming_the_key(rng, tmp_path):
+    with pytest.raises(ValueError, match="output_activation must be None or one of"):
+        PolicyFile.linear(np.ones((2, 3)), np.zeros(2), output_activation="softsign")
+    with pytest.raises(ValueError, match="metadata key 'output_activation' is a key of the format"):
+        PolicyFile((np.ones((2, 3)),), (np.zeros(2),), np.zeros(3), np.ones(3), None,
+                   {"output_activation": "tanh"})  # fmt: skip
+    for value in (np.array("swish"), np.array(1.0), np.array(["tanh"])):
+        path = _save_raw(tmp_path / "bad.npz", _arrays(_linear(rng), output_activation=value))
+        with pytest.raises(ValueError, match="output_activation must be a 0-d string array"):
+            load_policy_file(path)
+
+
+def test_file_policy_jacobians_with_a_tanh_output_match_central_differences(rng):
+    plain = _mlp(rng, "tanh", sizes=(5, 6, 3))
+    layers = list(zip(plain.weights, plain.biases, strict=True))
+    file = PolicyFile.mlp(layers, "tanh", plain.obs_mean, plain.obs_std, output_activation="tanh")
+    theta, x = np.zeros(0), rng.standard_normal((6, 5))
+    bound = np.median(np.abs(file.output(x)[:, 0]))
+    policy = FilePolicy(file, np.array([-bound, -1.0, -1.0]), np.array([bound, 1.0, 1.0]))
+    du_dx, _ = policy.jacobians(theta, x)
+    for m in range(6):
+        fd = _central_jacobian(lambda o: policy.act(theta, o[None])[0], x[m])
+        np.testing.assert_allclose(du_dx[m], fd, rtol=1e-6, atol=1e-8)
