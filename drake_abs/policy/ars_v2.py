@@ -45,6 +45,7 @@ import numpy as np
 from drake_abs._validation import as_finite_array
 from drake_abs.contact.unconverged import UnconvergedStepError
 from drake_abs.policy.estimators import PolicyObjective
+from drake_abs.policy.observation_normalizer import RunningMeanStd
 
 __all__ = [
     "PUBLISHED_SETTINGS",
@@ -236,49 +237,6 @@ class _ParameterBlocks:
     def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
         rows = [self.vjp(theta, x, np.broadcast_to(e, (len(x), self.nu))) for e in np.eye(self.nu)]
         return np.stack([r[0] for r in rows], 1), np.stack([r[1] for r in rows], 1)
-
-
-class RunningMeanStd:
-    """Mean and (population) standard deviation of every state pushed so far, updated by
-    batches (Chan et al.'s pairwise combination of counts, means and sums of squared
-    deviations): exactly numpy's ``mean`` and ``std`` of all pushed rows, to rounding.
-
-    Before the first push: mean 0, std 1 (the paper's mu_0 = 0, Sigma_0 = I).
-    """
-
-    def __init__(self, nx: int):
-        if isinstance(nx, bool) or not isinstance(nx, int | np.integer) or nx < 1:
-            raise ValueError(f"nx must be a whole number >= 1; got {nx!r}")
-        self.nx = int(nx)
-        self.count = 0
-        self._mean = np.zeros(self.nx)
-        self._m2 = np.zeros(self.nx)
-
-    def push(self, states) -> None:
-        """Add states (n, nx)."""
-        x = as_finite_array(states, "states", ndim=(2,))
-        if x.shape[1] != self.nx:
-            raise ValueError(f"states must have shape (n, nx) = (n, {self.nx}); got {x.shape}")
-        n = x.shape[0]
-        if n == 0:
-            return
-        b_mean = x.mean(axis=0)
-        b_m2 = ((x - b_mean) ** 2).sum(axis=0)
-        total = self.count + n
-        delta = b_mean - self._mean
-        self._mean = self._mean + delta * (n / total)
-        self._m2 = self._m2 + b_m2 + delta**2 * (self.count * n / total)
-        self.count = total
-
-    @property
-    def mean(self) -> np.ndarray:
-        return self._mean.copy()
-
-    @property
-    def std(self) -> np.ndarray:
-        if self.count == 0:
-            return np.ones(self.nx)
-        return np.sqrt(self._m2 / self.count)
 
 
 @dataclass(frozen=True)

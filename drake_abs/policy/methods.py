@@ -9,8 +9,12 @@ smoothing.** A method refers to a design by that name; its numbers (mu, mu_max, 
 experiment's settings, passed to :meth:`Method.make_smoothing`.
 
 A method is either a gradient estimator (``estimator`` in :data:`ESTIMATORS`, run by
-:meth:`Method.estimate`) or a trainer of its own (``"ars"``, ``"mbpo"``: they do not estimate a
-gradient of the same objective, and the experiments call their training loops).
+:meth:`Method.estimate`) or a trainer of its own (:data:`TRAINERS`: ``"ars"``, ``"mbpo"``,
+``"shac"``, ``"fopg_episode"``: they do not estimate a gradient of the same objective, and the
+experiments call their training loops). ``"shac"`` is short differentiable windows with a
+learned value tail (Xu et al. 2022) and ``"fopg_episode"`` plain FOPG over whole episodes from
+the reset noise, both run by :class:`drake_abs.policy.shac.ShacTrainer`
+(:meth:`drake_abs.policy.shac.ShacConfig.for_method` gives a method's settings).
 
 ``fopg_bs_<mu>`` names FOPG through barrier smoothing at that mu (e.g. ``fopg_bs_1e-2``);
 :func:`method` parses it.
@@ -33,7 +37,15 @@ from drake_abs.policy.estimators import (
 )
 from drake_abs.policy.pipps import pipps
 
-__all__ = ["ESTIMATORS", "METHODS", "SMOOTHINGS", "Method", "method", "make_smoothing"]
+__all__ = [
+    "ESTIMATORS",
+    "METHODS",
+    "SMOOTHINGS",
+    "TRAINERS",
+    "Method",
+    "method",
+    "make_smoothing",
+]
 
 #: smoothing design -> its display label
 SMOOTHINGS = {
@@ -41,8 +53,10 @@ SMOOTHINGS = {
     "bs": "barrier smoothing (BS, fixed mu)",
     "abs": "adaptive barrier smoothing (ABS, contact-aware mu)",
 }
-#: the gradient estimators a method can name (the trainers "ars" and "mbpo" are not among them)
+#: the gradient estimators a method can name (the trainers are not among them)
 ESTIMATORS = ("first_order", "zeroth_order", "alpha_order", "pipps")
+#: the methods with a training loop of their own
+TRAINERS = ("ars", "mbpo", "shac", "fopg_episode")
 
 
 def make_smoothing(
@@ -77,7 +91,8 @@ class Method:
         label: the display name (``"FOPG-ABS"``).
         smoothing: the design of the model the method trains through (:data:`SMOOTHINGS`); the
             true system every method is scored on is exact.
-        estimator: one of :data:`ESTIMATORS`, or ``"ars"`` / ``"mbpo"`` (trainers of their own).
+        estimator: one of :data:`ESTIMATORS`, or one of :data:`TRAINERS` (a training loop of
+            its own).
         gradient: ``"total"`` (mu's dependence on the state differentiated) or ``"frozen"``
             (mu held, Zhang et al. 2023, Algorithm 1), where the model has a pathwise gradient.
         mu: the fixed mu of a ``bs`` method named with its value (``fopg_bs_1e-2``); None takes
@@ -96,15 +111,15 @@ class Method:
     def __post_init__(self):
         if self.smoothing not in SMOOTHINGS:
             raise ValueError(f"smoothing must be one of {list(SMOOTHINGS)}; got {self.smoothing!r}")
-        if self.estimator not in (*ESTIMATORS, "ars", "mbpo"):
+        if self.estimator not in (*ESTIMATORS, *TRAINERS):
             raise ValueError(
-                f"estimator must be one of {ESTIMATORS} or 'ars', 'mbpo'; got {self.estimator!r}"
+                f"estimator must be one of {ESTIMATORS} or {TRAINERS}; got {self.estimator!r}"
             )
         check_gradient_mode(self.gradient)
 
     @property
     def estimates_gradient(self) -> bool:
-        """Whether :meth:`estimate` applies (False for the trainers ARS and MBPO)."""
+        """Whether :meth:`estimate` applies (False for the :data:`TRAINERS`)."""
         return self.estimator in ESTIMATORS
 
     def make_smoothing(
@@ -158,6 +173,18 @@ METHODS: dict[str, Method] = {
                description="augmented random search V2-t (Mania et al. 2018)"),
         Method("mbpo", "MBPO-style", "exact", "mbpo",
                description="learned ensemble model, first-order policy updates inside it"),
+        Method("shac_abs", "SHAC-ABS", "abs", "shac",
+               description="short differentiable windows through adaptive barrier smoothing, "
+                           "learned value tail (SHAC, Xu et al. 2022)"),
+        Method("shac_exact", "SHAC", "exact", "shac",
+               description="short differentiable windows through exact contact, learned value "
+                           "tail (SHAC, Xu et al. 2022)"),
+        Method("fopg_episode_abs", "FOPG-ABS (episodes)", "abs", "fopg_episode",
+               description="first-order gradient of whole episodes from the reset noise, "
+                           "through adaptive barrier smoothing"),
+        Method("fopg_episode_exact", "FOPG (episodes)", "exact", "fopg_episode",
+               description="first-order gradient of whole episodes from the reset noise, "
+                           "through exact contact"),
     )
 }  # fmt: skip
 

@@ -16,7 +16,9 @@ def test_every_method_names_a_design_and_a_unique_label():
     labels = [m.label for m in METHODS.values()]
     assert len(set(labels)) == len(labels)
     assert all(m.smoothing in SMOOTHINGS for m in METHODS.values())
-    assert {m.name for m in METHODS.values() if not m.estimates_gradient} == {"ars", "mbpo"}
+    trainers = {m.name for m in METHODS.values() if not m.estimates_gradient}
+    assert trainers == {"ars", "mbpo", "shac_abs", "shac_exact", "fopg_episode_abs",
+                        "fopg_episode_exact"}  # fmt: skip
 
 
 def test_smoothing_policies_of_each_design():
