@@ -36,7 +36,8 @@ and the expected shape; :class:`PolicyFile` holds a checked policy (``act(obs)``
 only); :func:`to_policy_file` converts this package's policies of an observation
 (:class:`~drake_abs.policy.policies.LinearPolicy`,
 :class:`~drake_abs.policy.policies.MLPPolicy`,
-:class:`~drake_abs.policy.ars_v2.NormalizedLinearPolicy`); :class:`FilePolicy` runs a file as
+:class:`~drake_abs.policy.ars_v2.NormalizedLinearPolicy`, and any of these behind an
+observation normaliser); :class:`FilePolicy` runs a file as
 an engine :class:`~drake_abs.engine.protocols.Policy` (no parameters). The training code's own
 save format (:mod:`drake_abs.policy.saving`, npz + json with the config) is separate.
 """
@@ -509,32 +510,33 @@ def is_policy_file(path: str | Path) -> bool:
         return False
 
 
-def to_policy_file(policy, theta, **metadata) -> PolicyFile:
-    """The policy file of one of this package's policies of an observation, with parameters
-    ``theta``.
+def _is_normalized(policy) -> bool:
+    """Whether ``policy`` is ``u = inner((o - mean) / std)`` with frozen statistics
+    (:class:`drake_abs.policy.observation_normalizer.NormalizedPolicy`, recognised by its
+    parts)."""
+    return all(hasattr(policy, name) for name in ("inner", "mean", "std", "normalize"))
 
-    - :class:`~drake_abs.policy.policies.LinearPolicy` ``u = K (o - x_ref) + k``: W = K,
-      b = k (0 without bias), obs_mean = x_ref (0 without), obs_std = 1.
-    - :class:`~drake_abs.policy.policies.MLPPolicy` (tanh hidden layers): its layers, the
-      ``output_scale`` multiplied into the last one; obs_mean 0, obs_std 1.
-    - :class:`~drake_abs.policy.ars_v2.NormalizedLinearPolicy` ``u = K (o - mean) / std + k``:
-      W = K, b = k, obs_mean = mean, obs_std = std, with a coordinate it drops (std below its
-      ``min_std``) stored as a zero column of W and std 1.
 
-    The file's input is the policy's input: pass the inner policy of a task's observation
-    (:func:`drake_abs.tasks.published_policies.task_policy_file` does that for a task, checking
-    the observation). The file clips the output to the action space; these policies do not.
-    ``metadata`` become the file's metadata keys (:data:`METADATA_KEYS`), ``policy_kind``
-    added."""
+def _kind(policy) -> str:
+    if _is_normalized(policy):
+        return f"{type(policy).__name__}({_kind(policy.inner)})"
+    return type(policy).__name__
+
+
+def _converted(policy, theta: np.ndarray, metadata: dict) -> PolicyFile:
+    """The file of ``policy`` (one of :func:`to_policy_file`'s kinds) with parameters theta."""
+    if _is_normalized(policy):
+        inner = _converted(policy.inner, theta, metadata)
+        mean = np.asarray(policy.mean, dtype=float)
+        std = np.asarray(policy.std, dtype=float)
+        # ((o - mean) / std - m) / s = (o - (mean + std m)) / (std s)
+        return PolicyFile(inner.weights, inner.biases, mean + std * inner.obs_mean,
+                          std * inner.obs_std, inner.activation, metadata)  # fmt: skip
     if not isinstance(policy, LinearPolicy | MLPPolicy | NormalizedLinearPolicy):
         raise ValueError(
-            "policy must be a LinearPolicy, MLPPolicy or NormalizedLinearPolicy (of the "
-            f"observation); got {type(policy).__name__}"
+            "policy must be a LinearPolicy, MLPPolicy or NormalizedLinearPolicy of the "
+            f"observation, or a NormalizedPolicy of one; got {type(policy).__name__}"
         )
-    theta = as_finite_array(theta, "theta", ndim=(1,))
-    if theta.shape != (policy.n_params,):
-        raise ValueError(f"theta must have shape (P,) = ({policy.n_params},); got {theta.shape}")
-    metadata = {"policy_kind": type(policy).__name__} | metadata
     nx, nu = policy.nx, policy.nu
     if isinstance(policy, MLPPolicy):
         sizes, layers, o = policy.sizes, [], 0
@@ -553,6 +555,46 @@ def to_policy_file(policy, theta, **metadata) -> PolicyFile:
     keep = policy.scale > 0
     W = np.where(keep, K, 0.0)
     return PolicyFile.linear(W, k, policy.mean, np.where(keep, policy.std, 1.0), **metadata)
+
+
+def to_policy_file(policy, theta, **metadata) -> PolicyFile:
+    """The policy file of one of this package's policies of an observation, with parameters
+    ``theta``.
+
+    - :class:`~drake_abs.policy.policies.LinearPolicy` ``u = K (o - x_ref) + k``: W = K,
+      b = k (0 without bias), obs_mean = x_ref (0 without), obs_std = 1.
+    - :class:`~drake_abs.policy.policies.MLPPolicy` (tanh hidden layers): its layers, the
+      ``output_scale`` multiplied into the last one; obs_mean 0, obs_std 1.
+    - :class:`~drake_abs.policy.ars_v2.NormalizedLinearPolicy` ``u = K (o - mean) / std + k``:
+      W = K, b = k, obs_mean = mean, obs_std = std, with a coordinate it drops (std below its
+      ``min_std``) stored as a zero column of W and std 1.
+    - a normalised policy ``u = inner((o - mean) / std)`` of one of these (the observation
+      normaliser's ``NormalizedPolicy``: ``inner``, ``mean``, ``std``): the inner policy's file
+      with obs_mean = mean + std m and obs_std = std s (m, s the inner file's).
+
+    The file's input is the policy's input: pass the policy of a task's observation
+    (:func:`drake_abs.tasks.published_policies.task_policy_file` does that for a task, checking
+    the observation). The file clips the output to the action space; these policies do not.
+    ``metadata`` become the file's metadata keys (:data:`METADATA_KEYS`), ``policy_kind``
+    added.
+
+    The file is checked to reproduce the policy's output at a few observations (to 1e-9
+    relative); a mismatch raises ``RuntimeError`` (a policy that only looks like these)."""
+    theta = as_finite_array(theta, "theta", ndim=(1,))
+    n_params = getattr(policy, "n_params", None)
+    if n_params is not None and theta.shape != (n_params,):
+        raise ValueError(f"theta must have shape (P,) = ({n_params},); got {theta.shape}")
+    file = _converted(policy, theta, {"policy_kind": _kind(policy)} | metadata)
+    rng = np.random.default_rng(0)
+    obs = file.obs_mean + file.obs_std * rng.standard_normal((8, file.n_obs))
+    ours, theirs = file.output(obs), np.asarray(policy.act(theta, obs), dtype=float)
+    scale = max(1.0, float(np.max(np.abs(theirs))))
+    if theirs.shape != ours.shape or not np.allclose(ours, theirs, rtol=0, atol=1e-9 * scale):
+        raise RuntimeError(
+            f"the policy file of {_kind(policy)} does not reproduce its output: largest "
+            f"difference {float(np.max(np.abs(ours - theirs)))} (a defect of the conversion)"
+        )
+    return file
 
 
 @dataclass(frozen=True, eq=False)

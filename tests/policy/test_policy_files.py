@@ -9,6 +9,8 @@ Jacobians match central differences.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
@@ -228,6 +230,56 @@ def test_ars_policy_converts_with_its_normaliser_and_dropped_coordinates(rng):
     assert np.all(file.weights[0][:, 1] == 0) and file.obs_std[1] == 1.0
     obs = rng.standard_normal((40, 5))
     np.testing.assert_allclose(file.output(obs), policy.act(theta, obs), rtol=1e-13, atol=1e-14)
+
+
+@dataclass(frozen=True)
+class _Normalized:
+    """A stand-in of the observation normaliser's policy: u = inner((o - mean) / std)."""
+
+    inner: object
+    mean: np.ndarray
+    std: np.ndarray
+    divide: bool = True  # False: a policy that only looks like one (multiplies by std)
+
+    nx = property(lambda self: self.inner.nx)
+    nu = property(lambda self: self.inner.nu)
+    n_params = property(lambda self: self.inner.n_params)
+
+    def normalize(self, o):
+        return (o - self.mean) / self.std if self.divide else (o - self.mean) * self.std
+
+    def act(self, theta, o):
+        return self.inner.act(theta, self.normalize(np.asarray(o, dtype=float)))
+
+
+@pytest.mark.parametrize(
+    "inner", [LinearPolicy(5, 2), LinearPolicy(5, 2, x_ref=(0.1, 0.2, -0.3, 0.4, 0.5)),
+              MLPPolicy(5, 2, hidden=(6,))],
+    ids=["linear", "linear-xref", "mlp"],
+)  # fmt: skip
+def test_a_normalised_policy_converts_with_its_statistics(inner, rng):
+    policy = _Normalized(inner, rng.standard_normal(5), rng.uniform(0.2, 3.0, 5))
+    theta = 0.5 * rng.standard_normal(inner.n_params)
+    file = to_policy_file(policy, theta)
+    assert file.metadata["policy_kind"] == f"_Normalized({type(inner).__name__})"
+    obs = 3.0 * rng.standard_normal((40, 5))
+    np.testing.assert_allclose(file.output(obs), policy.act(theta, obs), rtol=1e-12, atol=1e-12)
+    if not isinstance(inner, LinearPolicy) or inner.x_ref is None:  # the inner has no own
+        np.testing.assert_array_equal(file.obs_mean, policy.mean)
+        np.testing.assert_array_equal(file.obs_std, policy.std)
+    impostor = _Normalized(inner, policy.mean, policy.std, divide=False)
+    with pytest.raises(RuntimeError, match="does not reproduce its output"):
+        to_policy_file(impostor, theta)
+
+
+def test_the_observation_normalisers_policy_converts(rng):
+    module = pytest.importorskip("drake_abs.policy.observation_normalizer")
+    inner = LinearPolicy(4, 2)
+    policy = module.NormalizedPolicy(inner, rng.standard_normal(4), rng.uniform(0.5, 2.0, 4))
+    theta = rng.standard_normal(inner.n_params)
+    file = to_policy_file(policy, theta)
+    obs = rng.standard_normal((20, 4))
+    np.testing.assert_allclose(file.output(obs), policy.act(theta, obs), rtol=1e-12, atol=1e-12)
 
 
 def test_other_policies_are_refused(rng):
