@@ -63,8 +63,20 @@ __all__ = [
     "PolicyFile",
     "is_policy_file",
     "load_policy_file",
+    "published_path",
     "to_policy_file",
 ]
+
+
+def published_path(env_id: str, method: str, seed: int, root: str | Path = "policies") -> Path:
+    """Where the final policy of ``method`` trained with ``seed`` for ``env_id`` ships:
+    ``root/<env id>/<method>/seed<k>.npz``."""
+    for name, value in (("env_id", env_id), ("method", method)):
+        if not isinstance(value, str) or not value or "/" in value or value.startswith("."):
+            raise ValueError(f"{name} must be a non-empty name without '/'; got {value!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a whole number >= 0; got {seed!r}")
+    return Path(root) / env_id / method / f"seed{int(seed)}.npz"
 
 
 def _elu_derivative(z: np.ndarray) -> np.ndarray:

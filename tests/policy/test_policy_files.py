@@ -23,6 +23,7 @@ from drake_abs.policy.policy_files import (
     PolicyFile,
     is_policy_file,
     load_policy_file,
+    published_path,
     to_policy_file,
 )
 
@@ -390,3 +391,13 @@ def test_file_policy_jacobians_with_a_tanh_output_match_central_differences(rng)
     for m in range(6):
         fd = _central_jacobian(lambda o: policy.act(theta, o[None])[0], x[m])
         np.testing.assert_allclose(du_dx[m], fd, rtol=1e-6, atol=1e-8)
+
+
+def test_published_paths():
+    assert (
+        str(published_path("Hopper-v5", "fopg_abs", 3)) == "policies/Hopper-v5/fopg_abs/seed3.npz"
+    )
+    assert published_path("Ant-v5", "ars", 0, root="/x").as_posix() == "/x/Ant-v5/ars/seed0.npz"
+    for bad in (("", "ars", 0), ("Hopper-v5", "a/b", 0), ("Hopper-v5", "ars", -1)):
+        with pytest.raises(ValueError, match="must be"):
+            published_path(*bad)
