@@ -130,9 +130,11 @@ def test_contact_probes_see_the_ground(models):
 @pytest.mark.parametrize("scene", ["gym_hopper", "gym_half_cheetah"])
 def test_mujoco_coordinates_match_ours_in_free_flight(scene, models, record_property):
     """High above the ground (no contact) with MuJoCo stepping as we do (semi-implicit Euler,
-    one 10 ms step; the half-cheetah's joint springs, which our scene drops, off), our one-step
-    prediction is MuJoCo's to rounding wherever no joint is near a limit: qpos, qvel map to our
-    x entry by entry. gymnasium's own Hopper (RK4, 5 x 2 ms) differs by its integration only."""
+    one 10 ms step; the half-cheetah's joint springs off on both sides: MuJoCo applies them
+    explicitly, our step implicitly, tests/multibody/test_joint_springs.py compares the two),
+    our one-step prediction is MuJoCo's to rounding wherever no joint is near a limit: qpos,
+    qvel map to our x entry by entry. gymnasium's own Hopper (RK4, 5 x 2 ms) differs by its
+    integration only."""
     model = models[scene]
     base = model.x0.copy()
     base[1] += 5.0
@@ -144,10 +146,10 @@ def test_mujoco_coordinates_match_ours_in_free_flight(scene, models, record_prop
                    for s in seeds])  # fmt: skip
     effort = effort_limits(model.plant)
     u = np.stack([uniform_inputs(40, -0.1 * effort, 0.1 * effort, seed=[4, s]) for s in seeds])
-    stepper = model.stepper()
     options = {"integrator": "Euler", "timestep": 0.01, "springs": False}
     for what, source in (("euler", mujoco_source(model, options=options)),
                          ("gymnasium", mujoco_source(model))):  # fmt: skip
+        stepper = model.stepper(springs=what != "euler")
         run = open_loop(source.stepper, x0, u, jacobians=False)
         data = Transitions.from_trajectory(run, source=source.name, time_step=source.time_step,
                                            in_contact=source.in_contact)  # fmt: skip
