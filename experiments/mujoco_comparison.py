@@ -4,8 +4,14 @@ joint torques, and Drake's SAP on the scene's twin beside them.
 
 Three scenarios per scene: a passive drop from the file's initial pose, a fixed seeded open-loop
 torque sequence (piecewise constant, redrawn every ``hold`` steps) and a joint-limit hit (a
-constant torque driving the last actuated joint into its upper limit during the drop). Reported:
-RMS differences of the configuration trajectories (ours against MuJoCo and against SAP), the
+constant torque driving one joint into a limit during the drop: the Hopper's foot into its upper
+limit, the HalfCheetah's back foot into its lower one, the one its spring lets a full-range motor
+reach, :data:`LIMIT_HIT`). Our step
+runs twice: with hard contact (the scene as shipped, side ``ours``) and with the contact
+compliance option that reproduces MuJoCo's soft contact from the file's own solref, solimp and
+margins (``compliance: {kind: mujoco, from_model: true}``, side ``ours_soft``;
+:mod:`drake_abs.contact.compliance`). Reported: RMS differences of the configuration trajectories
+(ours against MuJoCo and against SAP; each of our two sides against MuJoCo, side by side), the
 torso's final height, the deepest penetration of a contact into the ground, the total normal
 contact impulse and the total joint-limit impulse; and the Jacobians of our step on these scenes
 against central finite differences of the same step.
@@ -14,17 +20,17 @@ The models are the same but the contact laws are not; see :data:`WHY_THEY_DIFFER
 
 MuJoCo's side: ``opt.timestep`` is set to the scene's time step and ``opt.integrator`` to Euler
 (semi-implicit; the Hopper file asks for RK4, which ``mjd_transitionFD`` refuses and which a
-stiff soft contact at 10 ms does not need); the joints' springs are zeroed (``jnt_stiffness``),
-as the HalfCheetah scene drops them (the Hopper's are 0 already). States map one to one: the
-scenes' q, v are MuJoCo's qpos, qvel (same joints, same order, same references), and our input,
-the joint torque, is MuJoCo's ctrl times the motor's gear.
+stiff soft contact at 10 ms does not need); the joints' springs are MuJoCo's own, as the
+scenes take them too (the HalfCheetah's, stiffness towards 0; the Hopper has none). States map
+one to one: the scenes' q, v are MuJoCo's qpos, qvel (same joints, same order, same
+references), and our input, the joint torque, is MuJoCo's ctrl times the motor's gear.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +49,13 @@ SCENES = ("gym_hopper", "gym_half_cheetah")
 #: scene -> (gymnasium asset, gymnasium's frame_skip in the v5 environments)
 GYM_FILES = {"gym_hopper": ("hopper.xml", 4), "gym_half_cheetah": ("half_cheetah.xml", 5)}
 
+#: scene -> (the motor driven into a joint limit in the limit-hit scenario, by index; the
+#: multiple of Config.limit_ctrl its ctrl takes: its sign picks the limit). The HalfCheetah's
+#: springs (stiffness 60 ... 240 N m/rad) hold every joint off its limits at half its motor's
+#: range; its back foot (gear 60, spring 120 N m/rad) reaches its lower limit, -0.4 rad, at full
+#: range.
+LIMIT_HIT = {"gym_hopper": (-1, 1.0), "gym_half_cheetah": (2, -2.0)}
+
 #: Why the two simulators' trajectories differ (written into the report).
 WHY_THEY_DIFFER = (
     "Contact law: ours is hard (complementarity): the normal impulse stops penetration within the "
@@ -57,7 +70,10 @@ WHY_THEY_DIFFER = (
     "capsule landing on its side touches at its middle in MuJoCo only. SAP is soft too (convex, "
     "compliant point contact), between the two. Once the torques make the models walk or fall "
     "over, small differences grow: the open-loop RMS is a measure of that divergence, not of an "
-    "error of either side."
+    "error of either side. ours_soft is our step with MuJoCo's contact law (the file's solref, "
+    "solimp and margins as a regularised LCP): it sinks and springs back as MuJoCo does; what "
+    "remains is the geometry, the cone (its friction rows stay hard; a planar scene has 2 of "
+    "MuJoCo's 4 pyramid edges) and the joint limits, which stay hard."
 )
 
 
@@ -69,10 +85,11 @@ class Config:
     limit_steps: int = 60
     hold: int = 5  # open-loop: steps each random ctrl is held
     ctrl_scale: float = 0.5  # open-loop ctrl drawn uniformly in +-ctrl_scale
-    limit_ctrl: float = 0.5  # joint-limit hit: ctrl on the last motor
+    limit_ctrl: float = 0.5  # joint-limit hit: ctrl on the motor of LIMIT_HIT (times its factor)
     gradient_states: int = 3  # states of the open-loop rollout where Jacobians are checked
     seed: int = 0
     sap: bool = True
+    compliance: bool = True  # also run our step with MuJoCo's soft contact (side ours_soft)
 
     @classmethod
     def test_size(cls) -> Config:
@@ -85,15 +102,17 @@ def gym_asset(scene_name: str) -> Path:
     return Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets" / GYM_FILES[scene_name][0]
 
 
-def _ctrl(config: Config, scenario: str, steps: int, nu: int) -> np.ndarray:
-    """MuJoCo ctrl (steps, nu), in [-1, 1]: zero (drop), held random (open loop), or the last
-    motor's constant ``limit_ctrl`` (limit hit)."""
+def _ctrl(config: Config, scenario: str, steps: int, nu: int, scene: str) -> np.ndarray:
+    """MuJoCo ctrl (steps, nu), in [-1, 1]: zero (drop), held random (open loop), or the
+    constant ``limit_ctrl`` times the scene's factor on its :data:`LIMIT_HIT` motor (limit
+    hit)."""
     if scenario == "open_loop":
         return held_random_inputs(
             steps, nu, scale=config.ctrl_scale, hold=config.hold, seed=config.seed
         )
     ctrl = np.zeros((steps, nu))
-    ctrl[:, -1] = config.limit_ctrl if scenario == "limit_hit" else 0.0
+    motor, factor = LIMIT_HIT[scene]
+    ctrl[:, motor] = factor * config.limit_ctrl if scenario == "limit_hit" else 0.0
     return ctrl
 
 
@@ -139,12 +158,16 @@ def compare_scene(name: str, config: Config) -> dict:
     import mujoco
 
     sm = build_scene_model(name)
+    soft_scene = replace(sm.scene, compliance={"kind": "mujoco", "from_model": True})
     scene, plant, nq = sm.scene, sm.plant, sm.contact_model.nq
     file_model = mujoco.MjModel.from_xml_path(str(gym_asset(name)))
     gym_dt = float(file_model.opt.timestep) * GYM_FILES[name][1]
-    options = {"timestep": scene.time_step, "integrator": "Euler", "springs": False}
+    options = {"timestep": scene.time_step, "integrator": "Euler"}
     floor = mujoco.mj_name2id(file_model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
-    last = plant.get_joint_actuator(plant.GetJointActuatorIndices()[-1]).joint()
+    actuators = plant.GetJointActuatorIndices()
+    last = plant.get_joint_actuator(actuators[-1]).joint()
+    motor, factor = LIMIT_HIT[name]
+    hit = plant.get_joint_actuator(actuators[motor]).joint()
     context, torso = plant.CreateDefaultContext(), plant.GetBodyByName("torso")
     x0 = np.asarray(sm.x0, float)
     head = max(2, int(round(0.2 / scene.time_step)))
@@ -158,10 +181,12 @@ def compare_scene(name: str, config: Config) -> dict:
     steps = {"drop": config.drop_steps, "open_loop": config.torque_steps}
     steps["limit_hit"] = config.limit_steps
     for scenario, n in steps.items():
-        ctrl = _ctrl(config, scenario, n, file_model.nu)
+        ctrl = _ctrl(config, scenario, n, file_model.nu, name)
         torques = ctrl * file_model.actuator_gear[:, 0]
         sides = {"ours": (sm.stepper(), torques),
                  "mujoco": (MujocoStepper(file_model, options=options), ctrl)}  # fmt: skip
+        if config.compliance:
+            sides["ours_soft"] = (build_scene_model(soft_scene).stepper(), torques)
         if config.sap:
             sides["sap"] = (DrakePlantStepper(scene, "sap"), torques)
         res = row["scenarios"][scenario] = {}
@@ -181,18 +206,44 @@ def compare_scene(name: str, config: Config) -> dict:
                 e["max_geom_penetration"] = _floor_penetration(stepper.model, traj.x[0, :-1])
             if side != "sap":
                 e["limit_impulse_total"] = np.abs(log.stacked("limit_impulse")).sum()
-            if side == "ours":
+            if side in ("ours", "ours_soft"):
                 e["converged"] = bool(traj.converged.all())
+            if side == "ours":
                 x_ours = traj.x[0]
+            if side == "mujoco":
+                x_mujoco = traj.x[0]
+            if side == "ours_soft":
+                x_soft = traj.x[0]
             upper = last.position_upper_limits()[0]
             e["last_joint_max_over_upper"] = (qs[:, last.position_start()] - upper).max()
+            # past the limit LIMIT_HIT drives into (rad; negative: short of it)
+            if factor > 0:
+                past = qs[:, hit.position_start()] - hit.position_upper_limits()[0]
+            else:
+                past = hit.position_lower_limits()[0] - qs[:, hit.position_start()]
+            e["limit_joint_max_past_limit"] = past.max()
             if side != "ours":
                 e["rms_q_vs_ours"] = _rms(qs, x_ours[:, :nq])
                 e["rms_q_vs_ours_first_0.2s"] = _rms(qs[:head], x_ours[:head, :nq])
+            if side == "ours_soft":  # the gap to MuJoCo, beside the hard side's (below)
+                e["rms_q_vs_mujoco"] = _rms(qs, x_mujoco[:, :nq])
+                e["rms_q_vs_mujoco_first_0.2s"] = _rms(qs[:head], x_mujoco[:head, :nq])
             res[side] = {k: v if isinstance(v, bool) else float(v) for k, v in e.items()}
+        if config.compliance:  # hard and soft side by side: each one's gap to MuJoCo
+            res["gap_to_mujoco"] = {
+                contact: {"rms_q": res[side]["rms_q_vs_mujoco"] if side == "ours_soft"
+                          else res["mujoco"]["rms_q_vs_ours"],
+                          "rms_q_first_0.2s": res[side]["rms_q_vs_mujoco_first_0.2s"]
+                          if side == "ours_soft" else res["mujoco"]["rms_q_vs_ours_first_0.2s"]}
+                for contact, side in (("hard", "ours"), ("soft", "ours_soft"))
+            }  # fmt: skip
         if scenario == "open_loop" and config.gradient_states:
             idx = np.linspace(1, n - 1, config.gradient_states).astype(int)
             row["gradient"] = gradient_check(sm.stepper(), x_ours[idx], torques[idx])
+            if config.compliance:  # at the soft side's own states (contacts within margins)
+                row["gradient_soft"] = gradient_check(
+                    sides["ours_soft"][0], x_soft[idx], torques[idx]
+                )
     return row
 
 
@@ -219,7 +270,8 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
 
 
 def report(summary: dict) -> str:
-    lines = [f"Ours vs MuJoCo {summary['mujoco_version']} (soft contact) vs Drake SAP"]
+    lines = [f"Ours (hard; ours_soft: MuJoCo's soft contact) vs MuJoCo "
+             f"{summary['mujoco_version']} (soft contact) vs Drake SAP"]  # fmt: skip
     for row in summary["scenes"]:
         lines.append(
             f"\n{row['scene']}: time step {row['time_step']} s for all (gymnasium: file timestep "
@@ -231,6 +283,8 @@ def report(summary: dict) -> str:
         )
         for scenario, res in row["scenarios"].items():
             for side, e in res.items():
+                if side == "gap_to_mujoco":
+                    continue
                 lines.append(
                     f"  {scenario:10s} {side:7s} {e['final_torso_height']:8.4f} "
                     f"{1e3 * e['max_point_penetration']:9.3f} {e['normal_impulse_total']:9.2f} "
@@ -245,6 +299,23 @@ def report(summary: dict) -> str:
                 f"  our Jacobians vs central differences (open loop): dx/dx rel err "
                 f"{g['dx_dx_rel_err']:.2e}, dx/du {g['dx_du_rel_err']:.2e}"
             )
+        if "gradient_soft" in row:
+            g = row["gradient_soft"]
+            lines.append(
+                f"  with soft contact: dx/dx rel err {g['dx_dx_rel_err']:.2e}, dx/du "
+                f"{g['dx_du_rel_err']:.2e}"
+            )
+        gaps = [
+            (s, r["gap_to_mujoco"]) for s, r in row["scenarios"].items() if "gap_to_mujoco" in r
+        ]
+        if gaps:
+            lines.append("  gap to MuJoCo, RMS of q (whole run / first 0.2 s): hard | soft contact")
+            for scenario, gap in gaps:
+                hard, soft = gap["hard"], gap["soft"]
+                lines.append(
+                    f"    {scenario:10s} {hard['rms_q']:8.4f} / {hard['rms_q_first_0.2s']:8.4f} | "
+                    f"{soft['rms_q']:8.4f} / {soft['rms_q_first_0.2s']:8.4f}"
+                )
     lines.append("\nWhy they differ: " + summary["why_they_differ"])
     return "\n".join(lines)
 
