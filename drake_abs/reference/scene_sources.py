@@ -114,9 +114,10 @@ def mujoco_source(scene_model, *, options: dict | None = None) -> SceneSource:
     (:func:`~drake_abs.reference.mujoco_plant.apply_options`: ``timestep``, ``integrator``,
     ``cone``, ``contact=False``, ``springs=False``), stepped ``frame_skip`` times per step of the
     scene, its coordinates checked to be the scene's, driven in the scene's units
-    (:class:`TorqueInput`). E.g. ``options={"integrator": "Euler", "timestep": 0.01, "springs":
-    False}`` makes MuJoCo's step the scene's semi-implicit Euler step without the
-    HalfCheetah's joint springs (which the scene drops)."""
+    (:class:`TorqueInput`). E.g. ``options={"integrator": "Euler", "timestep": 0.01}`` makes
+    MuJoCo's step the scene's semi-implicit Euler step (MuJoCo applies the HalfCheetah's joint
+    springs explicitly, the scene's step implicitly; add ``"springs": False`` and step the
+    scene with ``stepper(springs=False)`` to compare without them)."""
     scene = scene_model.scene
     if scene.name not in MUJOCO_MODELS:
         raise ValueError(
