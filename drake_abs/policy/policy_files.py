@@ -543,7 +543,8 @@ def _converted(policy, theta: np.ndarray, metadata: dict) -> PolicyFile:
         std = np.asarray(policy.std, dtype=float)
         # ((o - mean) / std - m) / s = (o - (mean + std m)) / (std s)
         return PolicyFile(inner.weights, inner.biases, mean + std * inner.obs_mean,
-                          std * inner.obs_std, inner.activation, metadata)  # fmt: skip
+                          std * inner.obs_std, inner.activation, metadata,
+                          inner.output_activation)  # fmt: skip
     if not isinstance(policy, LinearPolicy | MLPPolicy | NormalizedLinearPolicy):
         raise ValueError(
             "policy must be a LinearPolicy, MLPPolicy or NormalizedLinearPolicy of the "

@@ -141,7 +141,7 @@ def task_policy_file(task: LocomotionTask, policy, theta, **metadata) -> PolicyF
             )
         file = PolicyFile(
             (W0[:, keep], *full.weights[1:]), full.biases, full.obs_mean[keep],
-            full.obs_std[keep], full.activation, full.metadata,
+            full.obs_std[keep], full.activation, full.metadata, full.output_activation,
         )  # fmt: skip
     if file.n_obs != task.n_obs or file.nu != task.nu:
         raise ValueError(f"policy maps {file.n_obs} observations to {file.nu} actions; task "
