@@ -348,7 +348,8 @@ def _forward(stepper, policy, theta, x0, noise, reward, sigma, jacobians, parame
             Fth[:, t] = step.dx_dtheta
         if of_transition:
             now = alive[:, t]
-            r, dr_dx, dr_du, dr_dxn = reward.transition(x, u, xs[:, t + 1])
+            extra = {"step": step} if getattr(reward, "uses_step", False) else {}
+            r, dr_dx, dr_du, dr_dxn = reward.transition(x, u, xs[:, t + 1], **extra)
             step_r[:, t] = np.where(now, r, 0.0)  # a step after the end counts nothing
             returns += step_r[:, t]
             if rx is not None:

@@ -115,6 +115,11 @@ class TransitionReward(Protocol):
       summed over t = 0 .. H-1;
     - ``terminal(x)`` -> (r_T (M,), dr_T/dx (M, nx)), added at t = H.
 
+    A reward with the class attribute ``uses_step = True`` is called as ``transition(x, u,
+    x_next, step=step)`` with the :class:`~drake_abs.contact.step.Step` that made x_next (a term
+    of the step's contact impulses, as the Ant's contact cost; its derivatives are the
+    reward's to give).
+
     Optionally ``terminated(x_next) -> (M,) bool``: an episode ends with the step that reached
     x_next (that step's reward counts; the later steps' rewards and the terminal reward do not,
     as in gymnasium, where ``terminated`` ends the episode). The indicator has zero derivative.

@@ -90,7 +90,30 @@ def add_model_specs(
             plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.weld, instance))
         for joint in spec.actuate:
             plant.AddJointActuator(f"{joint}_actuator", plant.GetJointByName(joint, instance))
+        if spec.floating_base == "quaternion":
+            add_quaternion_floating_joints(plant, instances)
     add_floating_base_chains(plant)
+
+
+def add_quaternion_floating_joints(plant: MultibodyPlant, instances) -> list[str]:
+    """Give every free root body of the model ``instances`` of ``plant`` (not finalized) a
+    quaternion floating joint to the world, named by the body, at the body's default pose from
+    its model file (``ModelSpec.floating_base: quaternion``). Returns the bodies' names."""
+    inboard = {int(plant.get_joint(i).child_body().index()) for i in plant.GetJointIndices()}
+    world = int(plant.world_body().index())
+    names = []
+    for instance in instances:
+        for i in plant.GetBodyIndices(instance):
+            if int(i) == world or int(i) in inboard:
+                continue
+            body = plant.get_body(i)
+            pose = plant.GetDefaultFloatingBaseBodyPose(body)
+            joint = plant.AddJoint(
+                QuaternionFloatingJoint(body.name(), plant.world_frame(), body.body_frame())
+            )
+            joint.SetDefaultPose(pose)
+            names.append(body.name())
+    return names
 
 
 #: The joints of a floating base, parent to child, with q = (x, y, z, yaw, pitch, roll) and v their

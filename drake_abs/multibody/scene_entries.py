@@ -64,6 +64,9 @@ def documented(cls: type) -> type:
 _OPTIONAL_TEXT = "a string or null"
 _FRICTION = "a number >= 0: the Coulomb friction coefficient, or null for frictionless contact"
 
+#: The coordinates ``ModelSpec.floating_base`` may give a free root body.
+FLOATING_BASES = ("euler", "quaternion")
+
 
 @documented
 @dataclass(frozen=True)
@@ -109,6 +112,16 @@ class ModelSpec:
         "has them is refused otherwise",
         default=(),
         choices=IGNORABLE,
+    )
+    floating_base: str = key(
+        f"one of {list(FLOATING_BASES)}: the coordinates of a free root body",
+        '``"euler"``: a chain of joints, q = (x, y, z, yaw, pitch, roll), v their rates '
+        '(singular at pitch = +-pi/2); ``"quaternion"``: a quaternion floating joint named by '
+        "the body, q = (qw, qx, qy, qz, x, y, z), v = (angular, translational velocity) in the "
+        "world, no singular orientation (:mod:`drake_abs.multibody.floating`). A URDF "
+        "``floating`` joint is a quaternion joint either way",
+        default="euler",
+        choices=FLOATING_BASES,
     )
 
 
@@ -206,7 +219,7 @@ class MujocoCompliance:
     )  # fmt: skip
     margin: float | None = key(
         "a number >= 0 (m), or null",
-        "A candidate has rows while its distance is at most this. Default: the file's "
+        "A candidate has rows while its distance is below this. Default: the file's "
         "(from_model) or 0",
         default=None,
     )

@@ -38,7 +38,12 @@ from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
 __all__ = ["ENV_IDS", "DrakeAbsEnv", "register_envs"]
 
 #: gymnasium ids registered by :func:`register_envs` -> task name.
-ENV_IDS = {"drake_abs/Hopper-v0": "hopper", "drake_abs/HalfCheetah-v0": "half_cheetah"}
+ENV_IDS = {
+    "drake_abs/Hopper-v0": "hopper",
+    "drake_abs/HalfCheetah-v0": "half_cheetah",
+    "drake_abs/Walker2d-v0": "walker2d",
+    "drake_abs/Ant-v0": "ant",
+}
 
 
 class DrakeAbsEnv(gymnasium.Env):
@@ -135,12 +140,13 @@ class DrakeAbsEnv(gymnasium.Env):
                 f"DrakeAbsEnv.step: the next state is not finite (state {self._x}, action {a})"
             )
         reward = self.task.reward
+        extra = {"step": step} if getattr(reward, "uses_step", False) else {}
         if hasattr(reward, "transition"):
-            r = reward.transition(x, u, x_next)[0]
+            r = reward.transition(x, u, x_next, **extra)[0]
         else:
             r = reward.stage(x, u)[0]
         terminated = bool(reward.terminated(x_next)[0]) if hasattr(reward, "terminated") else False
-        info = self._info("info", x, u, x_next)
+        info = self._info("info", x, u, x_next, *([step] if extra else []))
         info["converged"] = bool(np.asarray(step.converged).ravel()[0])
         self._x = x_next[0]
         self._steps += 1

@@ -61,6 +61,8 @@ from drake_abs.engine.protocols import Policy
 from drake_abs.engine.steppers import ZeroOrderHold
 from drake_abs.policy.estimators import PolicyObjective
 from drake_abs.tasks.adapters import ActionScaled, ObservationPolicy
+from drake_abs.tasks.ant import AntObservation, AntReward
+from drake_abs.tasks.free_body import FreeBodyCoordinates
 
 __all__ = [
     "GymLocomotionReward",
@@ -286,6 +288,18 @@ class GymLocomotionReward:
         return cls(6, 6, 3, dt, **(settings | overrides))
 
     @classmethod
+    def walker2d(cls, dt: float, **overrides) -> GymLocomotionReward:
+        """Walker2d-v5's defaults: w_f = 1, w_c = 1e-3, h = 1, healthy when the height q[1] is
+        in (0.8, 2.0) m and the pitch q[2] in (-1, 1) rad (no range on the other entries: every
+        x[2:] in (-inf, inf), which only a NaN fails), terminated when unhealthy."""
+        healthy = HealthyRanges(state=(-np.inf, np.inf), z=(0.8, 2.0), angle=(-1.0, 1.0))
+        settings = dict(
+            forward_reward_weight=1.0, ctrl_cost_weight=1e-3, healthy_reward=1.0,
+            healthy=healthy, terminate_when_unhealthy=True,
+        )  # fmt: skip
+        return cls(9, 9, 6, dt, **(settings | overrides))
+
+    @classmethod
     def half_cheetah(cls, dt: float, **overrides) -> GymLocomotionReward:
         """HalfCheetah-v5's defaults: w_f = 1, w_c = 0.1, no healthy term, never terminated."""
         settings = dict(forward_reward_weight=1.0, ctrl_cost_weight=0.1)
@@ -366,10 +380,16 @@ class ResetNoise:
     Args:
         scale: s (units of q and v); gymnasium's ``reset_noise_scale``.
         velocity: ``"uniform"`` or ``"normal"``.
+        coordinates: None: the state's coordinates are MuJoCo's (qpos, qvel). Else the map to
+            them (:class:`~drake_abs.tasks.free_body.FreeBodyCoordinates`, the Ant): the noise
+            is drawn on MuJoCo's (qpos, qvel) of x0, as gymnasium draws it, and mapped back
+            (a noisy quaternion stays as drawn, off the unit sphere, as in gymnasium; the step
+            normalises it, as ``mj_step`` does).
     """
 
     scale: float
     velocity: Literal["uniform", "normal"] = "uniform"
+    coordinates: FreeBodyCoordinates | None = None
 
     def __post_init__(self):
         if not (np.isfinite(self.scale) and self.scale >= 0):
@@ -383,6 +403,8 @@ class ResetNoise:
             raise ValueError(f"rng must be a numpy Generator; got {type(rng).__name__}")
         x0 = as_finite_array(x0, "x0", ndim=(1,))
         M = as_count(M, "M", minimum=0)
+        if self.coordinates is not None:
+            x0 = self.coordinates.to_mujoco(x0[None])[0]
         nv, s = x0.size - nq, self.scale
         out = np.empty((M, x0.size))
         for m in range(M):
@@ -392,7 +414,7 @@ class ResetNoise:
             else:
                 v = x0[nq:] + s * rng.standard_normal(nv)
             out[m] = np.concatenate([q, v])
-        return out
+        return out if self.coordinates is None else self.coordinates.from_mujoco(out)
 
 
 @dataclass(frozen=True)
@@ -498,15 +520,20 @@ class LocomotionTask:
         """gymnasium's ``info`` at states x (M, nx), each (M,): ``x_position`` (m) and, for the
         Hopper, ``z_distance_from_origin`` (m, the height above the initial state's)."""
         x = _batch(x, "x", self.nx, "nx")
+        if hasattr(self.reward, "position_info"):  # the Ant: x, y and distance
+            return self.reward.position_info(x)
         out = {"x_position": x[:, 0]}
         if self.report_z:
             out["z_distance_from_origin"] = x[:, 1] - self.x0[1]
         return out
 
-    def info(self, x, u, x_next) -> dict[str, np.ndarray]:
+    def info(self, x, u, x_next, step=None) -> dict[str, np.ndarray]:
         """gymnasium's ``info`` of a batch of steps, each (M,): :meth:`reset_info` of x_next
-        and the reward's terms (:meth:`GymLocomotionReward.terms`)."""
-        return self.reset_info(x_next) | self.reward.terms(x, u, x_next)
+        and the reward's terms (:meth:`GymLocomotionReward.terms`; given the ``step``, a
+        reward that reads it, the Ant's, adds its contact term)."""
+        extra = {"step": step} if step is not None and getattr(self.reward, "uses_step", False) \
+            else {}  # fmt: skip
+        return self.reset_info(x_next) | self.reward.terms(x, u, x_next, **extra)
 
 
 @dataclass(frozen=True)
@@ -534,11 +561,24 @@ TASKS: dict[str, _TaskSpec] = {
         False,
         5 * 0.01,
     ),  # fmt: skip
+    "walker2d": _TaskSpec(
+        "gym_walker2d", "Walker2d-v5", "walker2d", 10.0, ResetNoise(5e-3), True, 4 * 0.002
+    ),
+    # the Ant's reward, observation and info are drake_abs.tasks.ant's (velocity_clip unused)
+    "ant": _TaskSpec(
+        "gym_ant",
+        "Ant-v5",
+        "ant",
+        None,
+        ResetNoise(0.1, "normal", FreeBodyCoordinates(8)),
+        False,
+        5 * 0.01,
+    ),  # fmt: skip
 }
 
 
 def locomotion_task(
-    name: Literal["hopper", "half_cheetah"],
+    name: Literal["hopper", "half_cheetah", "walker2d", "ant"],
     *,
     smoothing=None,
     reward_options=None,
@@ -546,17 +586,18 @@ def locomotion_task(
     substeps: int | None = None,
     **stepper,
 ) -> LocomotionTask:
-    """gymnasium's ``Hopper-v5`` or ``HalfCheetah-v5`` on our plant (builds the scene; needs
-    Drake).
+    """gymnasium's ``Hopper-v5``, ``HalfCheetah-v5``, ``Walker2d-v5`` or ``Ant-v5`` on our
+    plant (builds the scene; needs Drake).
 
     Args:
-        name: ``"hopper"`` or ``"half_cheetah"``.
+        name: ``"hopper"``, ``"half_cheetah"``, ``"walker2d"`` or ``"ant"``
+            (:mod:`drake_abs.tasks.ant`).
         smoothing: the contact smoothing (default: the scene's, exact contact), used as given at
             the plant's step ``control_period / substeps``.
         reward_options: replace gymnasium's reward settings (``ctrl_cost_weight``,
             ``smooth_survive``, ...; see :class:`GymLocomotionReward`).
-        control_period: seconds per action (default gymnasium's: 8 ms Hopper, 50 ms
-            HalfCheetah).
+        control_period: seconds per action (default gymnasium's: 8 ms Hopper and Walker2d,
+            50 ms HalfCheetah and Ant).
         substeps: plant steps per action (default: the fewest that keep the plant's step at or
             below the scene's ``time_step``). More substeps: more accurate, slower.
         stepper: other settings of the scene's stepper
@@ -579,12 +620,22 @@ def locomotion_task(
     model = build_scene_model(replace(scene, time_step=dt / substeps))
     gears = np.array([a["gear"] for a in model.model_report()["actuators"]], dtype=float)
     inner = model.stepper(smoothing=smoothing, **stepper)
-    reward = getattr(GymLocomotionReward, spec.reward)(dt, **(reward_options or {}))
     nq, nv, nu = inner.sizes[:3]
+    if spec.reward == "ant":
+        from drake_abs.tasks.ant import ContactWrenches  # Drake's plant, only when building
+
+        instance = model.plant.GetBodyByName("torso").model_instance()
+        bodies = ["world"] + [model.plant.get_body(i).name()
+                              for i in model.plant.GetBodyIndices(instance)]  # fmt: skip
+        reward = AntReward(dt, ContactWrenches(model, bodies), **(reward_options or {}))
+        observation = AntObservation(nu)
+    else:
+        reward = getattr(GymLocomotionReward, spec.reward)(dt, **(reward_options or {}))
+        observation = LocomotionObservation(nq, nv, spec.velocity_clip)
     if (nq, nv, nu) != (reward.nq, reward.nv, reward.nu):
         raise RuntimeError(f"scene {spec.scene!r} has sizes {(nq, nv, nu)}, not gymnasium's")
     return LocomotionTask(
         name=name, stepper=ActionScaled(ZeroOrderHold(inner, substeps), gears), reward=reward,
-        observation=LocomotionObservation(nq, nv, spec.velocity_clip), x0=model.x0,
+        observation=observation, x0=model.x0,
         reset_noise=spec.reset_noise, dt=dt, env_id=spec.env_id, report_z=spec.report_z,
     )  # fmt: skip

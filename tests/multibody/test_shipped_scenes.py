@@ -42,6 +42,8 @@ SIZES = {
     # gymnasium's MuJoCo files as published (their rollouts: tests/multibody/test_model_files.py)
     "gym_hopper": (6, 6, 3, 5),
     "gym_half_cheetah": (9, 9, 6, 7),
+    "gym_walker2d": (9, 9, 6, 8),
+    "gym_ant": (15, 14, 8, 13),  # a free torso on a quaternion (nq = nv + 1)
     "ur5_fall": (6, 6, 6, 4),  # example-robot-data's UR5 as published
     # a sphere pusher (x, y) and a free box: 8 box vertices and the pusher-box pair
     "pusher_box": (8, 8, 2, 9),

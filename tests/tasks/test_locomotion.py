@@ -293,7 +293,7 @@ def test_env_bad_input(tasks):
     with pytest.raises(ValueError, match="max_episode_steps"):
         DrakeAbsEnv(tasks["hopper"], max_episode_steps=0)
     with pytest.raises(ValueError, match="name must be one of"):
-        locomotion_task("ant")
+        locomotion_task("humanoid")
     assert [env.step(np.zeros(3))[3] for _ in range(2)] == [False, True]  # truncated at 2
 
 
