@@ -151,6 +151,15 @@ class MLPPolicy:
         return self._forward(theta, x)[2]
 
     def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
+        return self._backward(theta, x, g_u, summed=False)
+
+    def vjp_sum(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
+        """(g_u du/dx (M, nx), sum_m g_u[m] du/dtheta[m] (P,)): :meth:`vjp` with the parameter
+        part summed over the batch, without forming one product per row (the gradient of a
+        loss summed over samples, e.g. a critic's fit)."""
+        return self._backward(theta, x, g_u, summed=True)
+
+    def _backward(self, theta, x, g_u, summed: bool) -> tuple[np.ndarray, np.ndarray]:
         theta, x = _check(theta, x, self.n_params, self.nx)
         layers, acts, _ = self._forward(theta, x)
         g = self.output_scale * np.asarray(g_u, float)  # (M, n_out)
@@ -158,13 +167,15 @@ class MLPPolicy:
         for layer in range(len(layers) - 1, -1, -1):
             W, _ = layers[layer]
             a_in = acts[layer]
-            grads.append(
-                np.concatenate([np.einsum("mi,mj->mij", g, a_in).reshape(len(x), -1), g], 1)
-            )
+            if summed:
+                grads.append(np.concatenate([(g.T @ a_in).reshape(-1), g.sum(axis=0)]))
+            else:
+                outer = np.einsum("mi,mj->mij", g, a_in).reshape(len(x), -1)
+                grads.append(np.concatenate([outer, g], 1))
             g = g @ W
             if layer > 0:
                 g = g * (1.0 - acts[layer] ** 2)  # tanh'
-        return g, np.concatenate(grads[::-1], axis=1)
+        return g, np.concatenate(grads[::-1], axis=-1)
 
     def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
         theta, x = _check(theta, x, self.n_params, self.nx)

@@ -85,8 +85,8 @@ class ValueFunction:
             raise ValueError(f"targets must have shape (M,) = ({z.shape[0]},); got {targets.shape}")
         error = net.act(phi, z)[:, 0] - targets
         M = z.shape[0]
-        _, g_phi = net.vjp(phi, z, (2.0 / M) * error[:, None])
-        return float(np.mean(error * error)), g_phi.sum(axis=0)
+        _, g_phi = net.vjp_sum(phi, z, (2.0 / M) * error[:, None])
+        return float(np.mean(error * error)), g_phi
 
     def fit(
         self,

@@ -123,3 +123,15 @@ def test_bad_input_is_refused():
         td_lambda_targets(rewards, values, lengths, bootstrap, 0.9, 1.5)
     with pytest.raises(ValueError, match="hidden"):
         ValueFunction(3, ())
+
+
+def test_the_summed_product_is_the_sum_of_the_per_row_ones():
+    from drake_abs.policy.policies import MLPPolicy
+
+    rng = np.random.default_rng(7)
+    net = MLPPolicy(4, 2, (5, 3), output_scale=1.5)
+    theta, x, g = net.init(rng), rng.standard_normal((9, 4)), rng.standard_normal((9, 2))
+    gx, gth = net.vjp(theta, x, g)
+    gx_s, gth_s = net.vjp_sum(theta, x, g)
+    np.testing.assert_allclose(gx_s, gx, rtol=1e-14)
+    np.testing.assert_allclose(gth_s, gth.sum(axis=0), rtol=1e-12, atol=1e-14)
