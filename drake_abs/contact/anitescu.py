@@ -92,6 +92,7 @@ def anitescu_step(
         quant_g, cone_g, h, GeneratorSmoothing(smoothing, g), gradient, strict, par_g, options,
         regularize_normal=True,
         compliance=None if compliance is None else compliance.take(g.contact),
+        soft_dmu=None if par_g is None else dalpha,  # a generator's mu moves its R
     )  # fmt: skip
     L = g.to_lam
     lam_g = r.lam

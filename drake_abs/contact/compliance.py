@@ -61,6 +61,9 @@ Derivatives (R and c depend on the state through r = phi(q) - margin and J v): w
 (k_0 = k / d; A_hat' the row's weight; R's floor 1e-15 has zero derivative). The chain rule adds
 ``(dc/dr - 1) dphi + dc/d(Jv) d(Jv) + h (dR/dr) lam dphi`` to the hard row's derivative of the
 LCP's constant (:meth:`RowTerms.extra_derivative`); ``A_hat`` is a model constant, as in MuJoCo.
+A frictional row's weight grows with its friction coefficient mu (``2 mu^2 (1 + mu^2)``), so a
+model parameter that moves mu adds ``h (1 - d) / d (dweight/dmu) lam dmu``
+(:meth:`RowTerms.friction_derivative`).
 """
 
 from __future__ import annotations
@@ -156,6 +159,13 @@ class RowTerms:
     dR_dr: np.ndarray
     dc_dr: np.ndarray
     dc_dJv: np.ndarray
+    dR_dmu: np.ndarray | None = None
+
+    def friction_derivative(self, dmu: np.ndarray, lam_n: np.ndarray, h: float) -> np.ndarray:
+        """What the friction coefficients' derivatives ``dmu`` (n, T) (per normal row: its
+        contact's coefficient) add to the derivative of the LCP's constant (with F's derivative
+        applied to lam), (B, n, T): ``h dR/dmu lam dmu`` (the pyramid's R grows with mu)."""
+        return (h * self.dR_dmu * lam_n)[..., None] * dmu[None]
 
     def apply(self, F: np.ndarray, z: np.ndarray, phi: np.ndarray, h: float) -> None:
         """Turn the hard LCP ``(F, z)`` of :func:`~drake_abs.contact.stewart_trinkle
@@ -184,8 +194,9 @@ class RowTerms:
 class SoftRows:
     """The compliance of one step's n normal LCP rows (contacts, then e.g. joint-limit rows),
     at time step ``h``: which rows are soft, and per row (n,) its margin (m), its stiffness
-    ``k0`` (1/s^2, k = k0 d(r)) and damping ``b`` (1/s), its ``solimp`` (n, 5) and its weight
-    ``weight`` (1/kg, R = (1 - d) / d weight). Hard rows' entries are unused. Made by
+    ``k0`` (1/s^2, k = k0 d(r)) and damping ``b`` (1/s), its ``solimp`` (n, 5), its weight
+    ``weight`` (1/kg, R = (1 - d) / d weight) and that weight's derivative in the row's friction
+    coefficient ``dweight_dmu`` (1/kg). Hard rows' entries are unused. Made by
     :meth:`ContactCompliance.rows`; :meth:`take` selects rows (the Anitescu generators of a
     contact share its values)."""
 
@@ -195,13 +206,17 @@ class SoftRows:
     b: np.ndarray
     solimp: np.ndarray
     weight: np.ndarray
+    dweight_dmu: np.ndarray | None = None
 
     def take(self, index: np.ndarray, scale: np.ndarray | None = None) -> SoftRows:
         """The rows ``index`` (m,), their weights times ``scale`` (m,) where given."""
         weight = self.weight[index] if scale is None else self.weight[index] * scale
+        dweight = None if self.dweight_dmu is None else self.dweight_dmu[index]
+        if dweight is not None and scale is not None:
+            dweight = dweight * scale
         return SoftRows(
             self.soft[index], self.margin[index], self.k0[index], self.b[index],
-            self.solimp[index], weight,
+            self.solimp[index], weight, dweight,
         )  # fmt: skip
 
     def terms(self, phi: np.ndarray, Jv: np.ndarray, h: float) -> RowTerms:
@@ -228,18 +243,21 @@ class SoftRows:
         R_raw = (1 - d) / d * self.weight
         floor = R_raw <= MIN_VALUE
         R = np.where(soft, np.maximum(R_raw, MIN_VALUE), 0.0)
+        dR_dmu = np.zeros_like(R)
+        if self.dweight_dmu is not None:
+            dR_dmu = np.where(soft & ~floor, (1 - d) / d * self.dweight_dmu, 0.0)
         dR = np.where(soft & ~floor, -self.weight * dd / d**2, 0.0)
         c = np.where(soft, h * h * self.k0 * d * r + h * (h * self.b - 1) * Jv, phi)
         dc_dr = np.where(soft, h * h * self.k0 * (d + dd * r), 1.0)
         dc_dJv = np.where(soft, h * (h * self.b - 1), 0.0) + np.zeros_like(r)
-        return RowTerms(R=R, c=c, dR_dr=dR, dc_dr=dc_dr, dc_dJv=dc_dJv)
+        return RowTerms(R=R, c=c, dR_dr=dR, dc_dr=dc_dr, dc_dJv=dc_dJv, dR_dmu=dR_dmu)
 
 
 @dataclass(frozen=True, eq=False)
 class ContactCompliance:
     """MuJoCo's soft contact for a model's nc contact candidates (the module docstring): per
     candidate its ``solref`` (nc, 2), ``solimp`` (nc, 5), ``margin`` (nc,) (m; the candidate's
-    rows exist while its distance is at most this), ``inverse_weight`` (nc,) (1/kg, A_hat: the
+    rows exist while its distance is below this), ``inverse_weight`` (nc,) (1/kg, A_hat: the
     sum of the two bodies' translational inverse weights at the reference pose) and ``condim``
     (nc,) (MuJoCo's contact dimension: 1 frictionless, 3 sliding friction); ``impratio`` (> 0,
     MuJoCo's frictional-to-normal impedance ratio) and ``refsafe`` (raise timeconst to 2 h).
@@ -319,8 +337,10 @@ class ContactCompliance:
         return self.margin.shape[0]
 
     def active(self, phi: np.ndarray) -> np.ndarray:
-        """Which candidates have rows at distances ``phi`` (B, nc) (m): phi <= margin."""
-        return np.asarray(phi) <= self.margin
+        """Which candidates have rows at distances ``phi`` (B, nc) (m): phi < margin (strictly,
+        as MuJoCo's collision detection: a body resting exactly at its margin has no contact
+        and falls for a step)."""
+        return np.asarray(phi) < self.margin
 
     def rows(
         self,
@@ -363,8 +383,10 @@ class ContactCompliance:
         tran = self.inverse_weight[idx]
         edges = 4  # 2 (condim - 1) edges of a pyramid with sliding friction
         edge = 2 * mu**2 / self.impratio * tran * (1 + mu**2)  # R_e (1 - d) / d = edge
+        dedge = 2 * tran * (2 * mu + 4 * mu**3) / self.impratio
         per_row = edges / directions if formulation == "anitescu" else 1.0 / edges
         weight = np.where(frictional & (mu > 0), edge * per_row, tran)
+        dweight = np.where(frictional & (mu > 0), dedge * per_row, 0.0)
         pad = np.zeros(n_other)
         rows = SoftRows(
             soft=np.concatenate([np.ones(idx.size, dtype=bool), np.zeros(n_other, dtype=bool)]),
@@ -373,6 +395,7 @@ class ContactCompliance:
             b=np.concatenate([b, pad]),
             solimp=np.concatenate([imp, np.zeros((n_other, 5))]),
             weight=np.concatenate([weight, np.ones(n_other)]),
+            dweight_dmu=np.concatenate([dweight, pad]),
         )
         self._cache[key] = rows
         return rows

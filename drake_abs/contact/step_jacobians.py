@@ -47,6 +47,7 @@ def step_jacobians(
     gradient: GradientMode,
     par: ParameterDerivatives | None,
     soft: RowTerms | None = None,
+    soft_dmu: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """The chain rule of this module's docstring: dx+/d(x, u) and dlam/d(x, u); with ``par``, the
     theta columns (:func:`parameter_blocks`) appended to the same chain, giving dx+/dtheta and
@@ -57,7 +58,9 @@ def step_jacobians(
     (B, nc + nt, nv), the solution lam (B, d) with the solver's Jacobians (``lcp``), the
     generalised impulse f = G^T lam (B, nv) and v+ (B, nv). ``soft``: the compliance terms of
     the normal rows (:class:`~drake_abs.contact.compliance.RowTerms`), whose own derivatives
-    (through phi and J v) are added to the hard rows' (None: hard contact).
+    (through phi and J v, and with ``par`` through the friction coefficients: ``soft_dmu``
+    (nc, T) per normal row, default from ``par.dfriction``) are added to the hard rows' (None:
+    hard contact).
 
     Returns:
         ``dx_dx`` (B, nq + nv, nq + nv), ``dx_du`` (B, nq + nv, nu), ``dlam_dx`` (B, d, nq + nv)
@@ -94,6 +97,10 @@ def step_jacobians(
             if par.dJn is not None:
                 dJv_t = np.einsum("bint,bn->bit", par.dJn, quant.v)
             dz_t[:, :nc] += soft.extra_derivative(par.dphi, dJv_t, lam[:, :nc], h)
+            if soft_dmu is None:  # each normal row's friction coefficient, from the cone's
+                soft_dmu = np.zeros((nc, par.dphi.shape[-1]))
+                soft_dmu[cone.frictional] = par.dfriction
+            dz_t[:, :nc] += soft.friction_derivative(soft_dmu, lam[:, :nc], h)
             dzn_t = dzn_t + soft.extra_derivative(par.dphi, dJv_t, None, h)
         inner = np.concatenate([inner, inner_t], axis=-1)
         dz_eff = np.concatenate([dz_eff, dz_t], axis=-1)

@@ -117,13 +117,16 @@ def stewart_trinkle_step(
     options: dict[str, float],
     regularize_normal: bool = False,
     compliance: SoftRows | None = None,
+    soft_dmu: np.ndarray | None = None,
 ) -> ContactStepResult:
     """Assemble, smooth, solve (with the exact fallback), integrate and differentiate one
     batched step whose LCP rows are the cone's (Stewart-Trinkle, or Anitescu generators passed
     as a frictionless cone with ``regularize_normal``). The arguments are those of
     :func:`drake_abs.contact.contact_lcp.contact_step`, checked there, with ``options`` its
     complete solver options; ``compliance`` (per normal row) regularises its soft rows
-    (:mod:`drake_abs.contact.compliance`)."""
+    (:mod:`drake_abs.contact.compliance`); ``soft_dmu`` (nc, T): the derivative of each normal
+    row's friction coefficient in the model parameters, where the cone does not hold it (the
+    Anitescu generators; default: from ``parameters.dfriction``)."""
     nc, nt, nf = cone.sizes()
     F, z, S = assemble_lcp(quant, cone, h, regularize_normal=regularize_normal)
     soft = None
@@ -150,7 +153,7 @@ def stewart_trinkle_step(
     if jac:
         out = step_jacobians(
             quant, cone, h, F, z, S, G, lam, f, v_next, lcp, smoothing, gradient, parameters,
-            soft,
+            soft, soft_dmu,
         )  # fmt: skip
     return ContactStepResult(
         q_next=q_next,

@@ -108,7 +108,7 @@ class ComplementarityStepper:
             implicitly like the damping (:mod:`drake_abs.contact.damping`).
         compliance: soft contact as MuJoCo's (solref, solimp, margin per candidate;
             :class:`~drake_abs.contact.compliance.ContactCompliance`), or None (default) for
-            hard contact. A soft candidate has rows only while its distance is at most its
+            hard contact. A soft candidate has rows only while its distance is below its
             margin (as MuJoCo's contacts), and a step may end with it below the ground.
         solver_options: passed to the interior-point solver.
     """
