@@ -1,0 +1,574 @@
+"""Baselines from well-kept libraries, trained on our plant: PPO and SAC of stable-baselines3 and
+ARS of sb3-contrib on a locomotion task's ``gymnasium.Env``
+(:class:`~drake_abs.tasks.gym_env.DrakeAbsEnv`), with the RL Baselines3 Zoo's published
+hyperparameters, and their final policies written in the published policy-file format
+(:mod:`drake_abs.policy.policy_files`).
+
+The environment: ``DrakeAbsEnv(locomotion_task(name, **env_options), max_episode_steps=1000)``:
+gymnasium v5's reward, observation, termination and reset noise (drawn at every reset), one
+action per control period (gymnasium's, 8 ms Hopper, 50 ms HalfCheetah), episodes truncated
+after 1000 actions. One **environment step** is one control period stepped (one ``env.step``),
+as our own trainers count: the step that ends an episode counts, a reset does not.
+
+Hyperparameters (:data:`ZOO_SETTINGS`): the RL Baselines3 Zoo's (github.com/DLR-RM/
+rl-baselines3-zoo, ``hyperparams/*.yml``) for the MuJoCo task of the same body:
+
+- PPO: ``ppo.yml`` (commit 208b6fd) ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4`` (tuned)
+  and ``Ant-v4`` (its MuJoCo defaults: the library's own settings); observations and rewards
+  normalised by ``VecNormalize`` (``normalize: true``) with the algorithm's gamma, as the zoo
+  does;
+- SAC: ``sac.yml`` (commit c94924e) ``Hopper-v3``, ``HalfCheetah-v3``, ``Walker2d-v3``,
+  ``Ant-v3``: the library's defaults with ``learning_starts = 10000``; no normalisation;
+- ARS: ``ars.yml`` (commit c6c209e) ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``,
+  ``Ant-v4``: a linear policy, observations normalised by ``VecNormalize(norm_obs=True,
+  norm_reward=False)`` (running statistics of every visited observation).
+
+Where this differs from the zoo: the environments are gymnasium v5's tasks on our plant, not
+MuJoCo v3/v4; the budget is ``env_steps`` (not the zoo's ``n_timesteps``); ``VecNormalize``'s
+``clip_obs`` is infinite (the zoo's default is 10) because the policy file has no clip of the
+normalised observation: with it the exported policy is exactly the trained one (a finite
+``clip_obs`` can be asked for, and then :func:`sb3_policy_file` refuses to export); one
+environment, on the CPU, torch with one thread. ``algorithm_options`` override any setting.
+
+The budget: PPO and SAC stop after exactly ``env_steps`` environment steps (PPO's last,
+partial rollout is collected and counted but not trained on; sb3's own ``learn`` would run on
+to a multiple of ``n_steps``). ARS stops at the end of the iteration in which it reaches
+``env_steps`` (sb3-contrib's ``learn``: an iteration is 2 ``n_delta`` whole episodes, so it
+may run over by up to 2 ``n_delta`` x 1000 steps); the steps actually taken are returned.
+
+Seeds: ``seed`` seeds the library (python, numpy, torch, the action space) and the
+environment's first reset (later resets continue its generator). With torch on one thread
+the runs are bit-reproducible: the same seed gives the same policy to the last bit
+(``tests/tasks/test_sb3_baselines.py``).
+
+Exported policies (:func:`sb3_policy_file`): PPO's deterministic action is its actor's MLP
+(the hidden layers with their activation, then the linear action head), clipped; SAC's is
+``tanh`` of its actor's mean (the file's ``output_activation = "tanh"``); ARS's linear policy
+``W z`` (no bias), clipped. ``VecNormalize``'s observation statistics become ``obs_mean`` and
+``obs_std = sqrt(var + epsilon)``.
+
+Needs stable-baselines3, sb3-contrib and torch (``pip install 'drake-abs[baselines]'``),
+imported when a function here is called, and gymnasium.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Literal
+
+import gymnasium
+import numpy as np
+
+from drake_abs._validation import as_count
+from drake_abs.policy.policy_files import PolicyFile
+from drake_abs.tasks.gym_env import DrakeAbsEnv
+from drake_abs.tasks.locomotion import TASKS, locomotion_task
+
+__all__ = [
+    "ALGORITHMS",
+    "METHOD_KEYS",
+    "ZOO_SETTINGS",
+    "BaselineRun",
+    "StepLog",
+    "ZooSettings",
+    "baseline_settings",
+    "sb3_policy_file",
+    "train_baseline",
+]
+
+#: The algorithms :func:`train_baseline` runs.
+ALGORITHMS = ("ppo", "sac", "ars")
+
+#: The method key a baseline's policy file carries (``method`` metadata; the folder of
+#: ``policies/<env id>/<method>/``), by algorithm.
+METHOD_KEYS: Mapping[str, str] = MappingProxyType(
+    {"ppo": "sb3_ppo", "sac": "sb3_sac", "ars": "sb3_ars"}
+)
+
+
+@dataclass(frozen=True)
+class ZooSettings:
+    """One algorithm's published settings for one task.
+
+    Attributes:
+        source: where they are published (zoo file, commit, environment id).
+        hyperparameters: keyword arguments of the algorithm's constructor (``policy_kwargs``'
+            ``activation_fn`` by name: ``"relu"``, ``"tanh"``, ...).
+        normalize: ``VecNormalize`` keyword arguments, or None (no normalisation).
+    """
+
+    source: str
+    hyperparameters: Mapping[str, Any]
+    normalize: Mapping[str, Any] | None = None
+
+
+def _ppo_tuned(source, **values) -> ZooSettings:
+    policy_kwargs = dict(log_std_init=-2, ortho_init=False, activation_fn="relu",
+                         net_arch=dict(pi=[256, 256], vf=[256, 256]))  # fmt: skip
+    return ZooSettings(source, MappingProxyType({**values, "policy_kwargs": policy_kwargs}),
+                       MappingProxyType({"norm_obs": True, "norm_reward": True}))  # fmt: skip
+
+
+def _ars(source, **values) -> ZooSettings:
+    return ZooSettings(source, MappingProxyType({"policy": "LinearPolicy", **values}),
+                       MappingProxyType({"norm_obs": True, "norm_reward": False}))  # fmt: skip
+
+
+_PPO = "rl-baselines3-zoo hyperparams/ppo.yml (commit 208b6fd), "
+_SAC = "rl-baselines3-zoo hyperparams/sac.yml (commit c94924e), "
+_ARS = "rl-baselines3-zoo hyperparams/ars.yml (commit c6c209e), "
+_SAC_MUJOCO = MappingProxyType({"learning_starts": 10000})
+
+#: The zoo's settings (module docstring) by algorithm and task name.
+ZOO_SETTINGS: Mapping[str, Mapping[str, ZooSettings]] = MappingProxyType({
+    "ppo": MappingProxyType({
+        "hopper": _ppo_tuned(
+            _PPO + "Hopper-v4", batch_size=32, n_steps=512, gamma=0.999,
+            learning_rate=9.80828e-05, ent_coef=0.00229519, clip_range=0.2, n_epochs=5,
+            gae_lambda=0.99, max_grad_norm=0.7, vf_coef=0.835671,
+        ),
+        "half_cheetah": _ppo_tuned(
+            _PPO + "HalfCheetah-v4", batch_size=64, n_steps=512, gamma=0.98,
+            learning_rate=2.0633e-05, ent_coef=0.000401762, clip_range=0.1, n_epochs=20,
+            gae_lambda=0.92, max_grad_norm=0.8, vf_coef=0.58096,
+        ),
+        "walker2d": ZooSettings(
+            _PPO + "Walker2d-v4",
+            MappingProxyType(dict(
+                batch_size=32, n_steps=512, gamma=0.99, learning_rate=5.05041e-05,
+                ent_coef=0.000585045, clip_range=0.1, n_epochs=20, gae_lambda=0.95,
+                max_grad_norm=1.0, vf_coef=0.871923,
+            )),
+            MappingProxyType({"norm_obs": True, "norm_reward": True}),
+        ),
+        "ant": ZooSettings(_PPO + "Ant-v4 (its MuJoCo defaults)", MappingProxyType({}),
+                           MappingProxyType({"norm_obs": True, "norm_reward": True})),
+    }),
+    "sac": MappingProxyType({
+        "hopper": ZooSettings(_SAC + "Hopper-v3", _SAC_MUJOCO),
+        "half_cheetah": ZooSettings(_SAC + "HalfCheetah-v3", _SAC_MUJOCO),
+        "walker2d": ZooSettings(_SAC + "Walker2d-v3", _SAC_MUJOCO),
+        "ant": ZooSettings(_SAC + "Ant-v3", _SAC_MUJOCO),
+    }),
+    "ars": MappingProxyType({
+        "hopper": _ars(_ARS + "Hopper-v4", learning_rate=0.01, delta_std=0.025, n_delta=8,
+                       n_top=4, alive_bonus_offset=-1.0),
+        "half_cheetah": _ars(_ARS + "HalfCheetah-v4", learning_rate=0.02, delta_std=0.03,
+                             n_delta=32, n_top=4, alive_bonus_offset=0.0),
+        "walker2d": _ars(_ARS + "Walker2d-v4", learning_rate=0.03, delta_std=0.025, n_delta=40,
+                         n_top=30, alive_bonus_offset=-1.0),
+        "ant": _ars(_ARS + "Ant-v4", learning_rate=0.015, delta_std=0.025, n_delta=60,
+                    n_top=20, alive_bonus_offset=-1.0),
+    }),
+})  # fmt: skip
+
+#: ``VecNormalize`` settings this module always uses unless ``algorithm_options["normalize"]``
+#: says otherwise: no clip of the normalised observation (module docstring).
+_NORMALIZE_DEFAULTS = MappingProxyType({"clip_obs": float("inf")})
+
+
+def _check_names(task_name: str, algorithm: str) -> None:
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm must be one of {list(ALGORITHMS)}; got {algorithm!r}")
+    if task_name not in ZOO_SETTINGS[algorithm]:
+        raise ValueError(
+            f"task_name must be one of {sorted(ZOO_SETTINGS[algorithm])}; got {task_name!r}"
+        )
+
+
+def baseline_settings(
+    task_name: str, algorithm: Literal["ppo", "sac", "ars"], algorithm_options=None
+) -> dict:
+    """The settings :func:`train_baseline` uses: ``{"source", "hyperparameters",
+    "normalize"}`` (plain data), the zoo's (:data:`ZOO_SETTINGS`) with ``algorithm_options``
+    laid over the hyperparameters (its key ``"normalize"``: ``VecNormalize`` keyword arguments
+    laid over the zoo's, or False for none; ``"policy_kwargs"`` replaces the zoo's whole)."""
+    _check_names(task_name, algorithm)
+    options = dict(algorithm_options or {})
+    zoo = ZOO_SETTINGS[algorithm][task_name]
+    normalize = options.pop("normalize", None)
+    if normalize is False:
+        norm = None
+    elif normalize is None:
+        norm = None if zoo.normalize is None else {**_NORMALIZE_DEFAULTS, **zoo.normalize}
+    elif isinstance(normalize, Mapping):
+        norm = {**_NORMALIZE_DEFAULTS, **(zoo.normalize or {}), **normalize}
+    else:
+        raise ValueError(
+            "algorithm_options['normalize'] must be a dict of VecNormalize keyword arguments or "
+            f"False; got {normalize!r}"
+        )
+    hyper = {**zoo.hyperparameters, **options}
+    return {"source": zoo.source, "hyperparameters": hyper, "normalize": norm}
+
+
+# ------------------------------------------------------------------------------ the env wrapper
+
+
+class StepLog(gymnasium.Wrapper):
+    """Counts a ``gymnasium.Env``'s steps and records its training episodes and the rows of the
+    training log (wrap the raw environment, inside any normalisation: returns are the task's).
+
+    Every ``log_every`` steps (and at :meth:`close_log`) a row: ``env_steps``, ``seconds``
+    (wall time since :meth:`start_clock`), ``episodes`` (training episodes that ended since the
+    previous row), ``return_mean`` and ``length_mean`` over those (None when none ended),
+    ``unconverged`` (steps so far whose contact solve did not converge; ``info["converged"]``).
+    """
+
+    def __init__(self, env: gymnasium.Env, log_every: int):
+        super().__init__(env)
+        self.log_every = as_count(log_every, "log_every", minimum=1)
+        self.steps = 0
+        self.unconverged = 0
+        self.returns: list[float] = []
+        self.lengths: list[int] = []
+        self.rows: list[dict] = []
+        self._episode = (0.0, 0)
+        self._since = 0  # episodes ended before the last row
+        self._start = time.perf_counter()
+
+    def start_clock(self) -> None:
+        """Set the log's time origin to now."""
+        self._start = time.perf_counter()
+
+    @property
+    def seconds(self) -> float:
+        """Wall time since :meth:`start_clock` (s)."""
+        return time.perf_counter() - self._start
+
+    def reset(self, **kwargs):
+        self._episode = (0.0, 0)
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps += 1
+        self.unconverged += not info.get("converged", True)
+        total, length = self._episode
+        self._episode = (total + float(reward), length + 1)
+        if terminated or truncated:
+            self.returns.append(self._episode[0])
+            self.lengths.append(self._episode[1])
+            self._episode = (0.0, 0)
+        if self.steps % self.log_every == 0:
+            self._row()
+        return obs, reward, terminated, truncated, info
+
+    def _row(self) -> None:
+        recent = slice(self._since, len(self.returns))
+        returns, lengths = self.returns[recent], self.lengths[recent]
+        self._since = len(self.returns)
+        self.rows.append({
+            "env_steps": self.steps,
+            "seconds": self.seconds,
+            "episodes": len(returns),
+            "return_mean": float(np.mean(returns)) if returns else None,
+            "length_mean": float(np.mean(lengths)) if lengths else None,
+            "unconverged": self.unconverged,
+        })  # fmt: skip
+
+    def close_log(self) -> None:
+        """A last row, unless the last step already wrote one."""
+        if not self.rows or self.rows[-1]["env_steps"] != self.steps:
+            self._row()
+
+
+# ---------------------------------------------------------------------------------- training
+
+
+@dataclass(eq=False)
+class BaselineRun:
+    """One training run of :func:`train_baseline`.
+
+    Attributes:
+        task_name, algorithm, seed: what ran.
+        env_id: the gymnasium id the task reproduces (``"Hopper-v5"``).
+        env_steps: environment steps taken (control periods stepped).
+        seconds: wall time of the training (s), without building the task.
+        rows: the training log (:class:`StepLog`).
+        unconverged: steps whose contact solve did not converge.
+        settings: :func:`baseline_settings` of the run.
+        model: the trained stable-baselines3 / sb3-contrib model.
+        vec_normalize: its ``VecNormalize`` (None without normalisation).
+    """
+
+    task_name: str
+    algorithm: str
+    seed: int
+    env_id: str | None
+    env_steps: int
+    seconds: float
+    rows: list[dict]
+    unconverged: int
+    settings: dict
+    model: Any = field(repr=False)
+    vec_normalize: Any = field(repr=False, default=None)
+
+    def policy_file(self, **metadata) -> PolicyFile:
+        """The final policy as a policy file (:func:`sb3_policy_file`), with metadata
+        ``env_id``, ``method`` (:data:`METHOD_KEYS`), ``seed``, ``training_steps`` and the
+        package versions; ``metadata`` adds or replaces keys."""
+        meta = {"env_id": self.env_id, "method": METHOD_KEYS[self.algorithm],
+                "seed": self.seed, "training_steps": self.env_steps}  # fmt: skip
+        meta = {k: v for k, v in meta.items() if v is not None}
+        return sb3_policy_file(self.model, self.vec_normalize, **(meta | metadata))
+
+
+def _torch_policy_kwargs(policy_kwargs: Mapping | None) -> dict | None:
+    """``policy_kwargs`` with ``activation_fn`` given by name turned into torch's class."""
+    if policy_kwargs is None:
+        return None
+    from torch import nn
+
+    out = dict(policy_kwargs)
+    names = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "sigmoid": nn.Sigmoid}
+    act = out.get("activation_fn")
+    if isinstance(act, str):
+        if act not in names:
+            raise ValueError(f"policy_kwargs['activation_fn'] must be one of {sorted(names)} or a "
+                             f"torch module class; got {act!r}")  # fmt: skip
+        out["activation_fn"] = names[act]
+    return out
+
+
+def _algorithm_class(algorithm: str):
+    if algorithm == "ars":
+        from sb3_contrib import ARS
+
+        return ARS
+    from stable_baselines3 import PPO, SAC
+
+    return {"ppo": PPO, "sac": SAC}[algorithm]
+
+
+def train_baseline(
+    task_name: Literal["hopper", "half_cheetah", "walker2d", "ant"],
+    algorithm: Literal["ppo", "sac", "ars"],
+    seed: int,
+    env_steps: int,
+    *,
+    env_options: Mapping | None = None,
+    algorithm_options: Mapping | None = None,
+    log_every: int = 10_000,
+    max_episode_steps: int = 1000,
+) -> BaselineRun:
+    """Train ``algorithm`` (stable-baselines3's PPO or SAC, sb3-contrib's ARS) on the task
+    ``task_name`` on our plant for ``env_steps`` environment steps (module docstring).
+
+    Args:
+        task_name: a task of :data:`~drake_abs.tasks.locomotion.TASKS`.
+        algorithm: ``"ppo"``, ``"sac"`` or ``"ars"``.
+        seed: seeds the library and the environment's resets (a whole number >= 0).
+        env_steps: the budget, in environment steps (control periods).
+        env_options: keyword arguments of
+            :func:`~drake_abs.tasks.locomotion.locomotion_task` (``smoothing``,
+            ``control_period``, ``substeps``, ``reward_options``, ...).
+        algorithm_options: replace the zoo's settings (:func:`baseline_settings`), e.g.
+            ``{"learning_starts": 100}`` or ``{"normalize": {"clip_obs": 10.0}}``.
+        log_every: environment steps between the rows of the training log.
+        max_episode_steps: steps after which an episode is truncated (gymnasium's 1000).
+
+    Returns:
+        A :class:`BaselineRun`; ``.policy_file()`` is the final policy as a policy file.
+
+    Raises:
+        ValueError: a bad argument, named.
+        FloatingPointError: our plant's state became non-finite (the step count is in the
+            message's notes); training stops there.
+    """
+    _check_names(task_name, algorithm)
+    if task_name not in TASKS:
+        raise ValueError(f"task_name must be one of {sorted(TASKS)}; got {task_name!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a whole number >= 0; got {seed!r}")
+    seed = int(seed)
+    env_steps = as_count(env_steps, "env_steps", minimum=1)
+    settings = baseline_settings(task_name, algorithm, algorithm_options)
+
+    import torch
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    task = locomotion_task(task_name, **dict(env_options or {}))
+    log = StepLog(DrakeAbsEnv(task, max_episode_steps=max_episode_steps), log_every)
+    venv = DummyVecEnv([lambda: log])
+    vec_normalize = None
+    if settings["normalize"] is not None:
+        kwargs = dict(settings["normalize"])
+        if algorithm != "ars" and "gamma" in settings["hyperparameters"]:
+            kwargs.setdefault("gamma", settings["hyperparameters"]["gamma"])  # as the zoo does
+        venv = vec_normalize = VecNormalize(venv, **kwargs)
+    hyper = dict(settings["hyperparameters"])
+    policy = hyper.pop("policy", "MlpPolicy")
+    hyper["policy_kwargs"] = _torch_policy_kwargs(hyper.get("policy_kwargs"))
+    if hyper["policy_kwargs"] is None:
+        hyper.pop("policy_kwargs")
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        model = _algorithm_class(algorithm)(
+            policy, venv, seed=seed, device="cpu", verbose=0, **hyper
+        )
+        log.start_clock()
+
+        def within_budget(_locals, _globals) -> bool:
+            return log.steps < env_steps  # PPO and SAC stop here (ARS ignores it)
+
+        try:
+            model.learn(total_timesteps=env_steps, callback=within_budget)
+        except FloatingPointError as err:
+            err.add_note(f"train_baseline: after {log.steps} environment steps of "
+                         f"{algorithm} on {task_name}, seed {seed}")  # fmt: skip
+            raise
+        log.close_log()
+        seconds = log.seconds
+    finally:
+        torch.set_num_threads(threads)
+    return BaselineRun(
+        task_name=task_name, algorithm=algorithm, seed=seed, env_id=task.env_id,
+        env_steps=log.steps, seconds=seconds, rows=log.rows, unconverged=log.unconverged,
+        settings=settings, model=model, vec_normalize=vec_normalize,
+    )  # fmt: skip
+
+
+# ------------------------------------------------------------------------------------ export
+
+
+def _sequential(modules) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[str | None]]:
+    """The (W, b) of each Linear of a chain of torch modules and the activation after each
+    (None: none); ``ValueError`` for a module that is neither."""
+    from torch import nn
+
+    names = {nn.Tanh: "tanh", nn.ReLU: "relu", nn.Sigmoid: "sigmoid"}
+    layers, after = [], []
+    for module in modules:
+        if isinstance(module, nn.Linear):
+            W = module.weight.detach().cpu().double().numpy().copy()
+            b = (np.zeros(W.shape[0]) if module.bias is None
+                 else module.bias.detach().cpu().double().numpy().copy())  # fmt: skip
+            layers.append((W, b))
+            after.append(None)
+            continue
+        if isinstance(module, nn.ELU) and module.alpha == 1.0:
+            name = "elu"
+        elif isinstance(module, nn.Identity | nn.Flatten):
+            continue
+        else:
+            name = names.get(type(module))
+        if name is None or not layers or after[-1] is not None:
+            raise ValueError(
+                f"cannot write {module!r} in a policy file: a chain of Linear layers, each with "
+                "at most one activation (tanh, relu, elu with alpha 1, sigmoid), is expected"
+            )
+        after[-1] = name
+    if not layers:
+        raise ValueError("the policy has no Linear layer to write")
+    return layers, after
+
+
+def _check_identity_features(policy) -> None:
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+
+    extractor = getattr(policy, "features_extractor", None)
+    if extractor is not None and not isinstance(extractor, FlattenExtractor):
+        raise ValueError(f"the policy's features extractor must be FlattenExtractor (the "
+                         f"observation itself); got {type(extractor).__name__}")  # fmt: skip
+
+
+def _actor_chain(model) -> tuple[list, str | None]:
+    """The torch modules of the deterministic actor, and an activation the library applies
+    after them (SAC's tanh)."""
+    from stable_baselines3 import PPO, SAC
+
+    policy = model.policy
+    _check_identity_features(policy)
+    if isinstance(model, PPO):
+        if getattr(policy, "use_sde", False) or policy.squash_output:
+            raise ValueError("PPO with gSDE or a squashed output is not exported (the zoo's "
+                             "MuJoCo settings use neither)")  # fmt: skip
+        return [*policy.mlp_extractor.policy_net, policy.action_net], None
+    if isinstance(model, SAC):
+        actor = policy.actor
+        _check_identity_features(actor)
+        if actor.use_sde:
+            raise ValueError("SAC with gSDE is not exported (the zoo's MuJoCo settings do "
+                             "not use it)")  # fmt: skip
+        return [*actor.latent_pi, actor.mu], "tanh"  # the squashed Gaussian's mode: tanh(mean)
+    from sb3_contrib import ARS
+
+    if isinstance(model, ARS):
+        return list(policy.action_net), None
+    raise ValueError(
+        f"model must be a stable-baselines3 PPO or SAC or an sb3-contrib ARS; got "
+        f"{type(model).__name__}"
+    )
+
+
+def _versions(contrib: bool) -> dict[str, str]:
+    """The versions of stable-baselines3 (and sb3-contrib) and drake-abs, as metadata."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    dists = [("sb3_version", "stable-baselines3"), ("drake_abs_version", "drake-abs")]
+    if contrib:
+        dists.insert(1, ("sb3_contrib_version", "sb3-contrib"))
+    for key, dist in dists:
+        try:
+            out[key] = version(dist)
+        except PackageNotFoundError:
+            out[key] = "unknown"
+    return out
+
+
+def sb3_policy_file(model, vec_normalize=None, **metadata) -> PolicyFile:
+    """A trained model's deterministic policy as a policy file (module docstring): its action
+    of a raw observation o is ``model.predict(vec_normalize.normalize_obs(o),
+    deterministic=True)`` (without ``vec_normalize``: of o itself), clipped to [-1, 1].
+
+    Args:
+        model: a stable-baselines3 PPO or SAC, or an sb3-contrib ARS, on a Box observation and
+            a Box action space [-1, 1].
+        vec_normalize: its ``VecNormalize`` (observation statistics only; a finite
+            ``clip_obs`` is refused: the format cannot clip the normalised observation).
+        metadata: the file's metadata keys; ``policy_kind`` (the library's policy class) and
+            the library and drake-abs versions are added.
+
+    Raises:
+        ValueError: an architecture the format cannot express, an action space other than
+            [-1, 1], a finite ``clip_obs``.
+    """
+    space = model.action_space
+    if not isinstance(space, gymnasium.spaces.Box) or not (
+        np.all(space.low == -1.0) and np.all(space.high == 1.0)
+    ):
+        raise ValueError(f"the model's action space must be Box(-1, 1) (the locomotion tasks'); "
+                         f"got {space}")  # fmt: skip
+    chain, squash = _actor_chain(model)
+    layers, after = _sequential(chain)
+    hidden, output = after[:-1], after[-1]
+    if squash is not None:
+        if output is not None:
+            raise ValueError(f"the actor's last layer already has an activation ({output})")
+        output = squash
+    if len(set(hidden)) > 1 or None in hidden:
+        raise ValueError(f"the format has one activation for every hidden layer; the actor's "
+                         f"hidden layers have {hidden}")  # fmt: skip
+    mean = std = None
+    if vec_normalize is not None and vec_normalize.norm_obs:
+        if np.isfinite(vec_normalize.clip_obs):
+            raise ValueError(
+                f"vec_normalize clips the normalised observation at +-{vec_normalize.clip_obs}, "
+                "which a policy file cannot express: train with clip_obs = inf (this module's "
+                "default) to export the policy exactly"
+            )
+        rms = vec_normalize.obs_rms
+        mean = np.asarray(rms.mean, dtype=float).copy()
+        std = np.sqrt(np.asarray(rms.var, dtype=float) + vec_normalize.epsilon)
+    contrib = type(model).__module__.startswith("sb3_contrib")
+    meta = {"policy_kind": type(model.policy).__name__, **_versions(contrib), **metadata}
+    if len(layers) == 1:
+        return PolicyFile.linear(*layers[0], mean, std, output_activation=output, **meta)
+    return PolicyFile.mlp(layers, hidden[0], mean, std, output_activation=output, **meta)

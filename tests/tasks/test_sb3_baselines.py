@@ -1,0 +1,239 @@
+"""Baselines of stable-baselines3 and sb3-contrib trained on our plant
+(drake_abs.tasks.sb3_baselines).
+
+The settings are the RL Baselines3 Zoo's numbers with options laid over them. A tiny training run
+of each algorithm on the Hopper (a few hundred environment steps) stops at the budget (PPO and
+SAC exactly; ARS at the end of its iteration), logs its rows, and is bit-reproducible with its
+seed. The exported policy file acts as the library's own ``predict(normalize_obs(o),
+deterministic=True)`` (to 1e-6 in the library's float32 at observations within a few standard
+deviations; to 1e-12 against a float64 forward pass of the library's own modules, far from the
+statistics too: no clip of the normalised observation anywhere), and it scores in MuJoCo's own
+Hopper-v5 as the library's model does there. Needs stable-baselines3 and sb3-contrib (the
+``baselines`` extra): skipped without them.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+pytest.importorskip("gymnasium")
+
+from drake_abs.tasks.sb3_baselines import (  # noqa: E402
+    ZOO_SETTINGS,
+    baseline_settings,
+    sb3_policy_file,
+    train_baseline,
+)
+
+#: Tiny runs: a PPO rollout of 64 steps, SAC's first 100 steps random, two ARS directions.
+TINY = {
+    "ppo": {"n_steps": 64, "batch_size": 32},
+    "sac": {"learning_starts": 100},
+    "ars": {"n_delta": 2, "n_top": 1},
+}
+BUDGET, LOG_EVERY = 250, 50
+
+
+def _libraries():
+    pytest.importorskip("stable_baselines3")
+    pytest.importorskip("sb3_contrib")
+    return pytest.importorskip("torch")
+
+
+# ------------------------------------------------------------------------------------ settings
+
+
+def test_the_settings_are_the_zoos_with_options_laid_over():
+    ppo = baseline_settings("hopper", "ppo")
+    assert ppo["source"].endswith("ppo.yml (commit 208b6fd), Hopper-v4")
+    h = ppo["hyperparameters"]
+    assert (h["n_steps"], h["batch_size"], h["gamma"], h["learning_rate"]) == (
+        512, 32, 0.999, 9.80828e-05)  # fmt: skip
+    assert h["policy_kwargs"]["net_arch"] == {"pi": [256, 256], "vf": [256, 256]}
+    assert ppo["normalize"] == {"clip_obs": np.inf, "norm_obs": True, "norm_reward": True}
+    assert baseline_settings("half_cheetah", "ppo")["hyperparameters"]["n_epochs"] == 20
+    assert baseline_settings("hopper", "sac") == {
+        "source": "rl-baselines3-zoo hyperparams/sac.yml (commit c94924e), Hopper-v3",
+        "hyperparameters": {"learning_starts": 10000}, "normalize": None,
+    }  # fmt: skip
+    ars = baseline_settings("half_cheetah", "ars", {"n_delta": 4, "normalize": {"clip_obs": 5}})
+    assert ars["hyperparameters"] == {"policy": "LinearPolicy", "learning_rate": 0.02,
+                                      "delta_std": 0.03, "n_delta": 4, "n_top": 4,
+                                      "alive_bonus_offset": 0.0}  # fmt: skip
+    assert ars["normalize"] == {"clip_obs": 5, "norm_obs": True, "norm_reward": False}
+    assert baseline_settings("hopper", "ppo", {"normalize": False})["normalize"] is None
+    assert baseline_settings("hopper", "sac", {"normalize": {}})["normalize"] == {
+        "clip_obs": np.inf}  # fmt: skip
+    assert all(set(table) == {"hopper", "half_cheetah", "walker2d", "ant"}
+               for table in ZOO_SETTINGS.values())  # fmt: skip
+
+
+def test_bad_names_and_options_are_refused():
+    with pytest.raises(ValueError, match=r"algorithm must be one of \['ppo', 'sac', 'ars'\]"):
+        baseline_settings("hopper", "td3")
+    with pytest.raises(ValueError, match="task_name must be one of"):
+        baseline_settings("swimmer", "ppo")
+    with pytest.raises(ValueError, match=r"algorithm_options\['normalize'\] must be a dict"):
+        baseline_settings("hopper", "ppo", {"normalize": True})
+    with pytest.raises(ValueError, match="env_steps must be"):
+        train_baseline("hopper", "ppo", 0, 0)
+    with pytest.raises(ValueError, match="seed must be a whole number >= 0"):
+        train_baseline("hopper", "ppo", -1, 10)
+
+
+# ------------------------------------------------------------------------------- tiny training
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """One tiny run of each algorithm on the Hopper, seed 3."""
+    _libraries()
+    return {algo: train_baseline("hopper", algo, 3, BUDGET, algorithm_options=TINY[algo],
+                                 log_every=LOG_EVERY) for algo in TINY}  # fmt: skip
+
+
+@pytest.mark.parametrize("algo", list(TINY))
+def test_a_tiny_run_keeps_to_its_budget_and_logs_its_rows(algo, runs):
+    run = runs[algo]
+    if algo == "ars":  # whole iterations of 2 n_delta episodes: over by less than one
+        assert BUDGET <= run.env_steps < BUDGET + 2 * TINY["ars"]["n_delta"] * 1000
+        assert run.model.num_timesteps == run.env_steps  # sb3-contrib counts the same steps
+    else:
+        assert run.env_steps == BUDGET
+    steps = [row["env_steps"] for row in run.rows]
+    assert steps[: BUDGET // LOG_EVERY] == list(range(LOG_EVERY, BUDGET + 1, LOG_EVERY))
+    assert steps[-1] == run.env_steps and steps == sorted(set(steps))
+    seconds = [row["seconds"] for row in run.rows]
+    assert seconds == sorted(seconds) and 0 < seconds[-1] <= run.seconds
+    assert sum(row["episodes"] for row in run.rows) >= 1
+    for row in run.rows:
+        assert (row["return_mean"] is None) == (row["episodes"] == 0)
+        if row["episodes"]:
+            assert np.isfinite(row["return_mean"]) and 1 <= row["length_mean"] <= 1000
+    assert run.unconverged == run.rows[-1]["unconverged"] >= 0
+    assert run.env_id == "Hopper-v5" and run.settings == baseline_settings(
+        "hopper", algo, TINY[algo])  # fmt: skip
+
+
+def _observations(run, rng, scale, M=200):
+    vn = run.vec_normalize
+    mean = np.zeros(11) if vn is None else vn.obs_rms.mean
+    std = np.ones(11) if vn is None else np.sqrt(vn.obs_rms.var)
+    return mean + scale * std * rng.standard_normal((M, 11))
+
+
+def _library_float64(run, obs):
+    """The deterministic action by the library's own torch modules, in float64 (written out per
+    algorithm here, apart from the module's export)."""
+    torch = _libraries()
+    vn = run.vec_normalize
+    z = obs if vn is None else (obs - vn.obs_rms.mean) / np.sqrt(vn.obs_rms.var + vn.epsilon)
+    x = torch.as_tensor(z, dtype=torch.float64)
+    policy = copy.deepcopy(run.model.policy).double()
+    with torch.no_grad():
+        if run.algorithm == "ppo":
+            out = policy.action_net(policy.mlp_extractor.policy_net(x))
+        elif run.algorithm == "sac":
+            out = torch.tanh(policy.actor.mu(policy.actor.latent_pi(x)))
+        else:
+            out = policy.action_net(x)
+    return np.clip(out.numpy(), -1.0, 1.0)
+
+
+@pytest.mark.parametrize("algo", list(TINY))
+def test_the_exported_file_acts_as_the_librarys_predict(algo, runs, rng, tmp_path):
+    run = runs[algo]
+    file = run.policy_file()
+    expected = {"env_id": "Hopper-v5", "method": f"sb3_{algo}", "seed": 3,
+                "training_steps": run.env_steps}  # fmt: skip
+    assert dict(file.metadata).items() >= expected.items()
+    assert (file.kind, file.output_activation) == {
+        "ppo": ("mlp", None), "sac": ("mlp", "tanh"), "ars": ("linear", None)}[algo]  # fmt: skip
+    vn = run.vec_normalize
+    assert (vn is None) == (algo == "sac") and (vn is None or vn.clip_obs == np.inf)
+    obs = _observations(run, rng, 2.0)
+    inputs = obs if vn is None else vn.normalize_obs(obs)
+    predicted, _ = run.model.predict(inputs, deterministic=True)
+    actions = file.act(obs)
+    np.testing.assert_allclose(actions, predicted, rtol=0, atol=1e-6)
+    inside = np.abs(actions) < 1.0
+    assert inside.mean() > 0.2 and np.std(actions[inside]) > 1e-3  # not all clipped, not constant
+    far = _observations(run, rng, 100.0)  # |z| up to ~400: a clip at 10 would change actions
+    both = np.concatenate([obs, far])
+    np.testing.assert_allclose(file.act(both), _library_float64(run, both), rtol=0, atol=1e-12)
+    back = type(file).from_arrays(np.load(file.save(tmp_path / "seed3.npz")))
+    np.testing.assert_array_equal(back.act(both), file.act(both))
+
+
+@pytest.mark.parametrize("algo", list(TINY))
+def test_the_exported_file_scores_in_mujoco_as_the_librarys_model(algo, runs):
+    pytest.importorskip("mujoco")
+    from drake_abs.reference.gym_scoring import score_policy
+
+    run = runs[algo]
+    vn = run.vec_normalize
+
+    def library(o):
+        inputs = o[None] if vn is None else vn.normalize_obs(o[None])
+        return run.model.predict(inputs, deterministic=True)[0][0]
+
+    file = score_policy(run.policy_file().act, "Hopper-v5", seeds=[0, 1], max_steps=40)
+    own = score_policy(library, "Hopper-v5", seeds=[0, 1], max_steps=40)
+    assert file["lengths"] == own["lengths"] and all(1 <= n <= 40 for n in file["lengths"])
+    np.testing.assert_allclose(file["returns"], own["returns"], rtol=1e-5)
+    assert np.all(np.isfinite(file["returns"]))
+
+
+def test_runs_are_bit_reproducible_with_their_seed(runs):
+    for algo in TINY:
+        again = train_baseline("hopper", algo, 3, BUDGET, algorithm_options=TINY[algo],
+                               log_every=LOG_EVERY)  # fmt: skip
+        a, b = runs[algo].policy_file().arrays(), again.policy_file().arrays()
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{algo}: {key}")
+        keep = ("env_steps", "episodes", "return_mean", "length_mean", "unconverged")
+        assert [{k: r[k] for k in keep} for r in runs[algo].rows] == [
+            {k: r[k] for k in keep} for r in again.rows]  # fmt: skip
+    other = train_baseline("hopper", "ars", 4, BUDGET, algorithm_options=TINY["ars"])
+    assert not np.array_equal(other.policy_file().weights[0], runs["ars"].policy_file().weights[0])
+
+
+# ---------------------------------------------------------------------------- what is refused
+
+
+def test_a_finite_observation_clip_is_not_exported(runs):
+    run = runs["ppo"]
+    clipped = copy.deepcopy(run.vec_normalize)
+    clipped.clip_obs = 10.0  # the zoo's default: the format cannot clip z
+    with pytest.raises(ValueError, match=r"clips the normalised observation at \+-10\.0"):
+        sb3_policy_file(run.model, clipped)
+    with pytest.raises(ValueError, match="model must be a stable-baselines3 PPO or SAC"):
+        sb3_policy_file(type("Model", (), {"action_space": run.model.action_space,
+                                           "policy": run.model.policy})())  # fmt: skip
+
+
+def test_other_actor_architectures_export_exactly(rng):
+    """PPO's default actor (tanh hidden layers) and ARS's MLP (relu, squashed by a Tanh module)
+    as built by the libraries, untrained, on MuJoCo's Hopper-v5 spaces."""
+    torch = _libraries()
+    gymnasium = pytest.importorskip("gymnasium")
+    pytest.importorskip("mujoco")
+    from sb3_contrib import ARS
+    from stable_baselines3 import PPO
+
+    torch.manual_seed(0)
+    env = gymnasium.make("Hopper-v5")
+    ppo = PPO("MlpPolicy", env, device="cpu", seed=0)
+    ars = ARS("MlpPolicy", env, device="cpu", seed=0, zero_policy=False,
+              policy_kwargs={"net_arch": [16]})  # fmt: skip
+    obs = 2.0 * rng.standard_normal((100, 11))
+    for model, kind in ((ppo, ("tanh", None)), (ars, ("relu", "tanh"))):
+        file = sb3_policy_file(model)
+        assert (file.activation, file.output_activation) == kind
+        predicted, _ = model.predict(obs.astype(np.float32), deterministic=True)
+        np.testing.assert_allclose(file.act(obs.astype(np.float32)), predicted, rtol=0,
+                                   atol=1e-6)  # fmt: skip
