@@ -30,11 +30,14 @@ normalised observation: with it the exported policy is exactly the trained one (
 ``clip_obs`` can be asked for, and then :func:`sb3_policy_file` refuses to export); one
 environment, on the CPU, torch with one thread. ``algorithm_options`` override any setting.
 
-The budget: PPO and SAC stop after exactly ``env_steps`` environment steps (PPO's last,
-partial rollout is collected and counted but not trained on; sb3's own ``learn`` would run on
-to a multiple of ``n_steps``). ARS stops at the end of the iteration in which it reaches
-``env_steps`` (sb3-contrib's ``learn``: an iteration is 2 ``n_delta`` whole episodes, so it
-may run over by up to 2 ``n_delta`` x 1000 steps); the steps actually taken are returned.
+The budget is each library's ``learn(total_timesteps=env_steps)``, which never wastes a step:
+SAC stops after exactly ``env_steps`` environment steps; PPO after the whole rollout in which it
+reaches them (a multiple of ``n_steps``, 512 in the zoo: at most 511 steps over); ARS after the
+whole iteration in which it reaches them (an iteration is 2 ``n_delta`` episodes: at most
+2 ``n_delta`` x 1000 steps over, e.g. 64000 for the HalfCheetah's 32 directions). The steps
+actually taken are counted and returned. Our own trainers also round to whole iterations.
+``max_seconds`` stops a run on the wall clock instead (for measuring speed): the rollout or
+iteration in progress is then counted but not used.
 
 Seeds: ``seed`` seeds the library (python, numpy, torch, the action space) and the
 environment's first reset (later resets continue its generator). With torch on one thread
@@ -293,6 +296,7 @@ class BaselineRun:
         settings: :func:`baseline_settings` of the run.
         model: the trained stable-baselines3 / sb3-contrib model.
         vec_normalize: its ``VecNormalize`` (None without normalisation).
+        stopped_early: ``max_seconds`` ran out before the budget was spent.
     """
 
     task_name: str
@@ -306,6 +310,7 @@ class BaselineRun:
     settings: dict
     model: Any = field(repr=False)
     vec_normalize: Any = field(repr=False, default=None)
+    stopped_early: bool = False
 
     def policy_file(self, **metadata) -> PolicyFile:
         """The final policy as a policy file (:func:`sb3_policy_file`), with metadata
@@ -334,6 +339,10 @@ def _torch_policy_kwargs(policy_kwargs: Mapping | None) -> dict | None:
     return out
 
 
+class _OutOfTime(Exception):
+    """Raised by the callback to stop ARS on the wall clock (``max_seconds``)."""
+
+
 def _algorithm_class(algorithm: str):
     if algorithm == "ars":
         from sb3_contrib import ARS
@@ -354,6 +363,7 @@ def train_baseline(
     algorithm_options: Mapping | None = None,
     log_every: int = 10_000,
     max_episode_steps: int = 1000,
+    max_seconds: float | None = None,
 ) -> BaselineRun:
     """Train ``algorithm`` (stable-baselines3's PPO or SAC, sb3-contrib's ARS) on the task
     ``task_name`` on our plant for ``env_steps`` environment steps (module docstring).
@@ -370,6 +380,8 @@ def train_baseline(
             ``{"learning_starts": 100}`` or ``{"normalize": {"clip_obs": 10.0}}``.
         log_every: environment steps between the rows of the training log.
         max_episode_steps: steps after which an episode is truncated (gymnasium's 1000).
+        max_seconds: stop after this much wall time (s) if the budget is not spent by then
+            (``stopped_early`` in the result); None: no limit.
 
     Returns:
         A :class:`BaselineRun`; ``.policy_file()`` is the final policy as a policy file.
@@ -386,6 +398,10 @@ def train_baseline(
         raise ValueError(f"seed must be a whole number >= 0; got {seed!r}")
     seed = int(seed)
     env_steps = as_count(env_steps, "env_steps", minimum=1)
+    if max_seconds is not None and not (
+        isinstance(max_seconds, int | float) and np.isfinite(max_seconds) and max_seconds > 0
+    ):
+        raise ValueError(f"max_seconds must be a number > 0 (s) or None; got {max_seconds!r}")
     settings = baseline_settings(task_name, algorithm, algorithm_options)
 
     import torch
@@ -414,11 +430,20 @@ def train_baseline(
         )
         log.start_clock()
 
-        def within_budget(_locals, _globals) -> bool:
-            return log.steps < env_steps  # PPO and SAC stop here (ARS ignores it)
+        stopped = []
+
+        def in_time(_locals, _globals) -> bool:
+            if max_seconds is None or log.seconds < max_seconds:
+                return True
+            stopped.append(log.steps)
+            if algorithm == "ars":  # sb3-contrib's ARS ignores a callback's False
+                raise _OutOfTime
+            return False  # PPO and SAC stop here
 
         try:
-            model.learn(total_timesteps=env_steps, callback=within_budget)
+            model.learn(total_timesteps=env_steps, callback=in_time)
+        except _OutOfTime:
+            pass
         except FloatingPointError as err:
             err.add_note(f"train_baseline: after {log.steps} environment steps of "
                          f"{algorithm} on {task_name}, seed {seed}")  # fmt: skip
@@ -431,6 +456,7 @@ def train_baseline(
         task_name=task_name, algorithm=algorithm, seed=seed, env_id=task.env_id,
         env_steps=log.steps, seconds=seconds, rows=log.rows, unconverged=log.unconverged,
         settings=settings, model=model, vec_normalize=vec_normalize,
+        stopped_early=bool(stopped),
     )  # fmt: skip
 
 

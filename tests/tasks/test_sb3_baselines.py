@@ -100,9 +100,12 @@ def test_a_tiny_run_keeps_to_its_budget_and_logs_its_rows(algo, runs):
     run = runs[algo]
     if algo == "ars":  # whole iterations of 2 n_delta episodes: over by less than one
         assert BUDGET <= run.env_steps < BUDGET + 2 * TINY["ars"]["n_delta"] * 1000
-        assert run.model.num_timesteps == run.env_steps  # sb3-contrib counts the same steps
+    elif algo == "ppo":  # whole rollouts of n_steps
+        assert run.env_steps == -(-BUDGET // 64) * 64
     else:
         assert run.env_steps == BUDGET
+    assert run.model.num_timesteps == run.env_steps  # the library counts the same steps
+    assert not run.stopped_early
     steps = [row["env_steps"] for row in run.rows]
     assert steps[: BUDGET // LOG_EVERY] == list(range(LOG_EVERY, BUDGET + 1, LOG_EVERY))
     assert steps[-1] == run.env_steps and steps == sorted(set(steps))
@@ -200,6 +203,18 @@ def test_runs_are_bit_reproducible_with_their_seed(runs):
             {k: r[k] for k in keep} for r in again.rows]  # fmt: skip
     other = train_baseline("hopper", "ars", 4, BUDGET, algorithm_options=TINY["ars"])
     assert not np.array_equal(other.policy_file().weights[0], runs["ars"].policy_file().weights[0])
+
+
+@pytest.mark.parametrize("algo", ["ppo", "ars"])
+def test_max_seconds_stops_a_run_on_the_wall_clock(algo):
+    _libraries()
+    run = train_baseline("hopper", algo, 0, 10**6, algorithm_options=TINY[algo], log_every=10,
+                         max_seconds=1.0)  # fmt: skip
+    assert run.stopped_early and 0 < run.env_steps < 10**6
+    assert 1.0 <= run.seconds < 10.0 and run.rows[-1]["env_steps"] == run.env_steps
+    assert np.all(np.isfinite(run.policy_file().weights[0]))
+    with pytest.raises(ValueError, match="max_seconds must be a number > 0"):
+        train_baseline("hopper", algo, 0, 10, max_seconds=0)
 
 
 # ---------------------------------------------------------------------------- what is refused
