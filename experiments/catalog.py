@@ -27,6 +27,7 @@ STANDARD_EXPERIMENTS: dict[str, str] = {
     "implicit-learning": "implicit_learning",
     "model-learning": "model_learning",
     "model-based-fopg": "model_based_fopg",
+    "gym-locomotion": "gym_locomotion",
 }
 EXPERIMENTS = tuple(STANDARD_EXPERIMENTS)
 
@@ -55,6 +56,8 @@ DESCRIPTIONS: dict[str, str] = {
     "network: prediction error vs horizon and data size",
     "model-based-fopg": "Algorithm 2 in closed loop: model learned from MuJoCo's Hopper, FOPG-ABS "
     "in it, evaluated in MuJoCo",
+    "gym-locomotion": "locomotion trained on our plant, scored in MuJoCo's own gymnasium v5 tasks "
+    "(seeds, floors, policy files)",
 }
 
 

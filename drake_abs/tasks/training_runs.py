@@ -1,0 +1,225 @@
+"""Training runs of locomotion policies on our plant, one interface for every trainer: a run is
+built from a task name, a method name (:mod:`drake_abs.policy.methods`) and a seed, advanced one
+iteration at a time to a budget of environment steps, checkpointed and resumed, and written out
+as a policy file anyone can load (:mod:`drake_abs.policy.policy_files`).
+
+A run (:class:`TrainingRun`) has
+
+- ``env_steps``: the control periods stepped so far by the trainer's environments, counted as the
+  trainer counts them (steps after an episode ended count nothing);
+- ``seconds``: wall time spent training (not scoring, not checkpointing);
+- ``iterate()``: one iteration, returning its log row (``rows``: all of them);
+- ``recent_return``: the mean return (gymnasium's reward) of the episodes completed lately;
+- ``task``: the task it trains on;
+- ``save(path)``: the whole training state, so that :func:`resume_run` continues it;
+- ``policy_file(**metadata)``: the current policy as a
+  :class:`~drake_abs.policy.policy_files.PolicyFile` of gymnasium's observation.
+
+The trainers, by the registry's ``estimator``:
+
+- ``"shac"``, ``"fopg_episode"``: :class:`~drake_abs.policy.shac.ShacTrainer` through the
+  method's smoothing of the plant (``abs``: the contact-aware mu of ``contact_aware``; ``exact``:
+  hard contact). The task's reward for training has the smooth survive term
+  (:class:`~drake_abs.tasks.locomotion.SmoothHealthy`) where the task has a healthy range and
+  ``smooth_survive`` is set; the trainer also logs the task's own (gymnasium's) reward.
+
+:class:`RunSettings` holds what defines a run besides its task, method and seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Literal, Protocol, runtime_checkable
+
+from drake_abs.policy.methods import method as registry_method
+from drake_abs.policy.policy_files import PolicyFile
+from drake_abs.policy.shac import ShacConfig, ShacTrainer
+from drake_abs.tasks.locomotion import (
+    TASKS,
+    GymLocomotionReward,
+    HealthyRanges,
+    LocomotionTask,
+    SmoothHealthy,
+    locomotion_task,
+)
+from drake_abs.tasks.published_policies import task_policy_file
+
+__all__ = ["RunSettings", "ShacRun", "TrainingRun", "resume_run", "start_run", "training_task"]
+
+#: the registry's trainers this module runs (see the module docstring)
+SHAC_TRAINERS = ("shac", "fopg_episode")
+
+
+@runtime_checkable
+class TrainingRun(Protocol):
+    """One training run (module docstring)."""
+
+    @property
+    def env_steps(self) -> int: ...
+
+    @property
+    def seconds(self) -> float: ...
+
+    @property
+    def rows(self) -> list[dict]: ...
+
+    @property
+    def recent_return(self) -> float | None: ...
+
+    def iterate(self) -> dict: ...
+
+    def save(self, path: str | Path) -> None: ...
+
+    def policy_file(self, **metadata) -> PolicyFile: ...
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What defines a training run besides its task, method and seed.
+
+    Attributes:
+        policy: ``"linear"`` or ``"mlp"`` (tanh hidden layers ``shac.hidden``).
+        contact_aware: (mu_max, length in m) of the adaptive barrier smoothing of ``abs``
+            methods; a larger mu_max is more smoothing.
+        smooth_survive: train on the smooth survive term where the task has a healthy range
+            (the score stays gymnasium's reward).
+        survive_width: (height width m, pitch width rad) of that term; larger is smoother.
+        shac: the SHAC trainer's settings (the method's own choices, whole-episode windows for
+            ``fopg_episode``, replace ``window``, ``critic`` and ``gamma``).
+        control_period: seconds per action; None: gymnasium's.
+        substeps: plant steps per action; None: the task's default.
+    """
+
+    policy: Literal["linear", "mlp"] = "linear"
+    contact_aware: tuple[float, float] = (1e-2, 0.05)
+    smooth_survive: bool = True
+    survive_width: tuple[float, float] = (0.05, 0.05)
+    shac: ShacConfig = field(default_factory=ShacConfig)
+    control_period: float | None = None
+    substeps: int | None = None
+
+    def __post_init__(self):
+        if self.policy not in ("linear", "mlp"):
+            raise ValueError(f"policy must be 'linear' or 'mlp'; got {self.policy!r}")
+        if not isinstance(self.shac, ShacConfig):
+            raise ValueError(f"shac must be a ShacConfig; got {type(self.shac).__name__}")
+        if len(self.contact_aware) != 2 or len(self.survive_width) != 2:
+            raise ValueError(
+                "contact_aware must be (mu_max, length) and survive_width (height, pitch); got "
+                f"{self.contact_aware!r}, {self.survive_width!r}"
+            )
+
+
+def training_task(task_name: str, method: str, settings: RunSettings) -> LocomotionTask:
+    """The task a method trains on: the method's smoothing of the plant, and the smooth
+    survive term where the task has a healthy range and ``settings.smooth_survive``."""
+    if task_name not in TASKS:
+        raise ValueError(f"task_name must be one of {sorted(TASKS)}; got {task_name!r}")
+    m = registry_method(method)
+    smoothing = m.make_smoothing(contact_aware=tuple(settings.contact_aware))
+    reward_options = None
+    healthy = _healthy_ranges(task_name)
+    if settings.smooth_survive and healthy is not None:
+        z_width, angle_width = settings.survive_width
+        reward_options = {
+            "smooth_survive": SmoothHealthy(healthy, z_width=z_width, angle_width=angle_width)
+        }
+    return locomotion_task(
+        task_name, smoothing=smoothing, gradient=m.gradient, reward_options=reward_options,
+        control_period=settings.control_period, substeps=settings.substeps,
+    )  # fmt: skip
+
+
+def _healthy_ranges(task_name: str) -> HealthyRanges | None:
+    """The healthy ranges of a task whose reward is gymnasium's planar one with a healthy term
+    (Hopper, Walker2d), else None."""
+    make = getattr(GymLocomotionReward, TASKS[task_name].reward, None)
+    if make is None:
+        return None
+    reward = make(1.0)
+    return reward.healthy if reward.healthy_reward != 0 else None
+
+
+class ShacRun:
+    """A :class:`~drake_abs.policy.shac.ShacTrainer` run (``shac`` and ``fopg_episode``
+    methods) as a :class:`TrainingRun`."""
+
+    def __init__(self, task_name: str, method: str, seed: int, settings: RunSettings):
+        m = registry_method(method)
+        if m.estimator not in SHAC_TRAINERS:
+            raise ValueError(f"method must be one of the SHAC trainer's; got {method!r}")
+        self.task_name, self.method, self.seed, self.settings = task_name, method, seed, settings
+        self.task = training_task(task_name, method, settings)
+        #: gymnasium's own reward (without the smooth survive term), logged beside the training
+        #: reward
+        self.score_reward = None
+        if getattr(self.task.reward, "smooth_survive", None) is not None:
+            self.score_reward = replace(self.task.reward, smooth_survive=None)
+        config = ShacConfig.for_method(method, **_shac_fields(settings))
+        self.trainer = ShacTrainer(self.task, config, seed, score_reward=self.score_reward)
+
+    @property
+    def env_steps(self) -> int:
+        return int(self.trainer.state.env_steps)
+
+    @property
+    def seconds(self) -> float:
+        return float(self.trainer.state.seconds)
+
+    @property
+    def rows(self) -> list[dict]:
+        """The trainer's log, one row per iteration."""
+        return self.trainer.state.rows
+
+    @property
+    def recent_return(self) -> float | None:
+        """Mean return, by gymnasium's reward, of the last episodes the trainer completed (None
+        before the first)."""
+        if not self.rows:
+            return None
+        row = self.rows[-1]
+        return row["recent_score"] if row.get("recent_score") is not None else row["recent_return"]
+
+    def iterate(self) -> dict:
+        return self.trainer.iterate()
+
+    def save(self, path: str | Path) -> None:
+        self.trainer.save(path)
+
+    def load(self, path: str | Path) -> ShacRun:
+        """This run continued from the checkpoint at ``path``."""
+        self.trainer = ShacTrainer.load(path, self.task, score_reward=self.score_reward)
+        return self
+
+    def policy_file(self, **metadata) -> PolicyFile:
+        policy = self.trainer.full_state_policy()
+        meta = {"method": self.method, "seed": self.seed, "training_steps": self.env_steps}
+        return task_policy_file(self.task, policy, self.trainer.state.theta, **(meta | metadata))
+
+
+def _shac_fields(settings: RunSettings) -> dict:
+    """The ShacConfig fields of ``settings.shac``, with the run's policy kind."""
+    values = asdict(replace(settings.shac, policy=settings.policy))
+    return {key: tuple(v) if isinstance(v, list) else v for key, v in values.items()}
+
+
+def start_run(task_name: str, method: str, seed: int, settings: RunSettings) -> TrainingRun:
+    """A new run of ``method`` (a registry name) on ``task_name`` seeded by ``seed``."""
+    m = registry_method(method)
+    if m.estimator in SHAC_TRAINERS:
+        return ShacRun(task_name, method, seed, settings)
+    raise ValueError(
+        f"method must be one this module trains (estimators {SHAC_TRAINERS}); {method!r} is "
+        f"{m.estimator!r}"
+    )
+
+
+def resume_run(
+    path: str | Path, task_name: str, method: str, seed: int, settings: RunSettings
+) -> TrainingRun:
+    """The run saved at ``path`` (by ``run.save``), continued: the caller checks that it was
+    started with the same task, method, seed and settings (the checkpoint holds the trainer's
+    state, not the task)."""
+    run = start_run(task_name, method, seed, settings)
+    return run.load(path)
