@@ -1,6 +1,7 @@
 """Short-horizon actor-critic (SHAC) through a differentiable stepper, and plain first-order
 policy gradients over whole episodes as its special case (Xu et al. 2022, "Accelerated Policy
-Learning with Parallel Differentiable Simulation", Algorithm 1; Zhang et al. 2023, section 4).
+Learning with Parallel Differentiable Simulation"; the ABS paper, Zhang et al. 2023, names a
+critic as the tail estimate among the modifications FOPG takes naturally).
 
 N environments persist across iterations. Iteration k:
 
@@ -19,7 +20,7 @@ N environments persist across iterations. Iteration k:
 
    the tail V only where the episode did not terminate (0 after termination; a window cut by
    the episode length or by h is bootstrapped), V the target critic of the normalised
-   observation (SHAC's eq. 4). The discount folds into the reward derivatives of each step, the
+   observation (as SHAC does). The discount folds into the reward derivatives of each step, the
    tail's gradient enters at x_(L_m);
 4. ``theta`` takes one Adam step (ascent) on ``dJ/dtheta / h`` (SHAC's per-step normalisation),
    its norm clipped at ``max_grad_norm``;

@@ -1,7 +1,7 @@
 """A learned state-value function (a critic) for short-horizon policy learning: a small MLP
 ``V(z; phi)`` of the normalised observation z, its TD(lambda) targets, and its fit by minibatch
-Adam on the squared error (Xu et al. 2022, "Accelerated Policy Learning with Parallel
-Differentiable Simulation" (SHAC), section 3.2, eq. 5-6).
+Adam on the squared error, as the critic of SHAC (Xu et al. 2022, "Accelerated Policy Learning
+with Parallel Differentiable Simulation").
 
 - :class:`ValueFunction`: ``V(z) = W_L tanh(... tanh(W_1 z + b_1) ...) + b_L`` (one output);
   the network and its backpropagation are :class:`~drake_abs.policy.policies.MLPPolicy`'s with
