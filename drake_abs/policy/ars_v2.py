@@ -18,6 +18,13 @@ One iteration j (Algorithm 2, lines 4-8):
 The policy is :class:`NormalizedLinearPolicy`, ``u = K diag(Sigma)^{-1/2} (x - mu)`` (no bias
 by default, as in the paper), with mu and Sigma held as attributes.
 
+The update (steps 3-4) is :func:`ars_update` and the perturbations :func:`perturbations`, shared
+with :class:`drake_abs.policy.ars_trainer.ArsTrainer`, which runs ARS as the authors' code runs it
+on gymnasium's tasks (the policy of the observation, every rollout an episode from the reset
+noise ended at termination, the survival shift). :func:`ars_v2_train` is the setting of the
+papers' figures: a :class:`~drake_abs.policy.estimators.PolicyObjective` (one initial state,
+a fixed horizon).
+
 Batched: by default the 2N perturbed policies (and the unperturbed one, when evaluated) run as
 one engine rollout: a policy wrapper gives each block of rollouts its own parameters
 (``batch_directions=False`` runs one ``obj.rollout`` per policy instead, with the same numbers).
@@ -49,29 +56,48 @@ from drake_abs.policy.observation_normalizer import RunningMeanStd
 
 __all__ = [
     "PUBLISHED_SETTINGS",
+    "SURVIVAL_SHIFT",
     "ArsRun",
+    "ArsUpdate",
     "NormalizedLinearPolicy",
+    "ParameterBlocks",
     "RunningMeanStd",
+    "ars_update",
     "ars_v2_train",
+    "perturbations",
 ]
 
-#: ARS V2-t hyperparameters for two MuJoCo locomotion tasks, from the appendix table of
-#: Mania et al. 2018 that goes with their Table 1 (Table 9 of arXiv:1803.07055 as recalled; the
-#: rows were not checked against the paper's text). Keys are :func:`ars_v2_train`'s arguments:
-#: step size alpha (``step_size``), directions N (``directions``), top b (``top``) and
-#: exploration noise nu (``noise``, units of the normalised policy's entries).
+#: ARS V2-t hyperparameters for the MuJoCo locomotion tasks, as in the appendix table of Mania
+#: et al. 2018 that goes with their Table 1 (Table 9 of arXiv:1803.07055). Keys are
+#: :func:`ars_v2_train`'s arguments: step size alpha (``step_size``), directions N
+#: (``directions``), top b (``top``) and exploration noise nu (``noise``, units of the normalised
+#: policy's entries). The paper's table itself was not read here; every row equals the RL
+#: Baselines3 Zoo's ``hyperparams/ars.yml`` rows for the same body, which the zoo marks as the
+#: settings closest to the original paper (``Hopper-v3``, ``HalfCheetah-v3``, ``Walker2d-v3``,
+#: ``Ant-v3``: learning_rate, n_delta, n_top, delta_std). Further checks:
 #:
-#: - Hopper: agrees with a third-party script running the authors' code (step 0.01,
+#: - Hopper: also agrees with a third-party script running the authors' code (step 0.01,
 #:   8 directions, 4 used, delta_std 0.025).
 #: - HalfCheetah: step size 0.02 and noise 0.03 agree with the HalfCheetah example in the README
-#:   of the authors' code (which runs 8 directions, all used); 32 directions with the top 4 are
-#:   as recalled from the paper's table.
+#:   of the authors' code (github.com/modestyachts/ARS; it runs 8 directions, all used).
 #:
-#: The authors' code also subtracts a survival bonus ("shift") of 1 per step for Hopper, none for
-#: HalfCheetah (not part of these settings: our objectives have no alive bonus).
+#: The survival shift of each task is :data:`SURVIVAL_SHIFT`.
 PUBLISHED_SETTINGS: dict[str, dict[str, float | int]] = {
     "Hopper-v1": {"step_size": 0.01, "directions": 8, "top": 4, "noise": 0.025},
     "HalfCheetah-v1": {"step_size": 0.02, "directions": 32, "top": 4, "noise": 0.03},
+    "Walker2d-v1": {"step_size": 0.03, "directions": 40, "top": 30, "noise": 0.025},
+    "Ant-v1": {"step_size": 0.015, "directions": 60, "top": 20, "noise": 0.025},
+}
+
+#: The survival "shift" the authors' code subtracts from every training step's reward (not from
+#: evaluation), per task: 1 (the alive bonus) for Hopper, Walker2d and Ant, 0 for HalfCheetah
+#: (the comment on ``--shift`` in ``code/ars.py`` of github.com/modestyachts/ARS; the RL
+#: Baselines3 Zoo's ``alive_bonus_offset`` is the same, with the opposite sign).
+SURVIVAL_SHIFT: dict[str, float] = {
+    "Hopper-v1": 1.0,
+    "HalfCheetah-v1": 0.0,
+    "Walker2d-v1": 1.0,
+    "Ant-v1": 1.0,
 }
 
 
@@ -182,14 +208,31 @@ class NormalizedLinearPolicy:
 
 
 @dataclass(frozen=True, eq=False)
-class _ParameterBlocks:
+class ParameterBlocks:
     """``copies`` parameter vectors of one :class:`NormalizedLinearPolicy` in one theta
-    (copies P,): the rollouts of a batch of M = copies m are cut into ``copies`` consecutive
-    blocks of m, block c acting with parameters c. Lets 2N perturbed policies run as one batched
-    engine rollout (each row of the batch is its own rollout)."""
+    (copies P,), each row of a batch acting with its own block: lets the 2N perturbed policies
+    of an ARS iteration run as one batched engine rollout (each row is its own rollout).
+
+    Which block a row uses: without ``owner``, a batch of M = copies m rows is cut into
+    ``copies`` consecutive blocks of m, block c acting with parameters c; with ``owner`` (M,)
+    whole numbers in [0, copies), row r acts with block ``owner[r]`` (a batch from which some
+    rollouts have left, e.g. ended episodes).
+    """
 
     policy: NormalizedLinearPolicy
     copies: int
+    owner: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.owner is not None:
+            owner = np.asarray(self.owner)
+            if (owner.ndim != 1 or not np.issubdtype(owner.dtype, np.integer)
+                    or np.any(owner < 0) or np.any(owner >= self.copies)):  # fmt: skip
+                raise ValueError(
+                    f"owner must be whole numbers (M,) in [0, copies = {self.copies}); got "
+                    f"{self.owner!r}"
+                )
+            object.__setattr__(self, "owner", owner.copy())
 
     @property
     def nx(self) -> int:
@@ -203,28 +246,57 @@ class _ParameterBlocks:
     def n_params(self) -> int:
         return self.copies * self.policy.n_params
 
-    def _blocks(self, theta, x):
+    def _check(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
         theta = as_finite_array(theta, "theta", ndim=(1,))
         if theta.shape != (self.n_params,):
             raise ValueError(f"theta must have shape (P,) = ({self.n_params},); got {theta.shape}")
         x = as_finite_array(x, "x", ndim=(2,))
-        if x.shape[1] != self.nx or x.shape[0] % self.copies:
+        if self.owner is None:
+            if x.shape[1] != self.nx or x.shape[0] % self.copies:
+                raise ValueError(
+                    f"x must have shape (copies m, nx) with copies = {self.copies}, "
+                    f"nx = {self.nx}; got {x.shape}"
+                )
+        elif x.shape != (self.owner.size, self.nx):
             raise ValueError(
-                f"x must have shape (copies m, nx) with copies = {self.copies}, nx = {self.nx}; "
-                f"got {x.shape}"
+                f"x must have shape (M, nx) = ({self.owner.size}, {self.nx}) (one row per "
+                f"owner); got {x.shape}"
             )
+        return theta, x
+
+    def _blocks(self, theta, x):
+        theta, x = self._check(theta, x)
         m = x.shape[0] // self.copies
         K, k = self.policy._split(theta.reshape(self.copies, self.policy.n_params))
         z = self.policy.normalize(x).reshape(self.copies, m, self.nx)
         return K, k, z
 
+    def _rows(self, theta, x):
+        theta, x = self._check(theta, x)
+        K, k = self.policy._split(theta.reshape(self.copies, self.policy.n_params))
+        return K[self.owner], k[self.owner], self.policy.normalize(x)
+
     def act(self, theta, x) -> np.ndarray:
+        if self.owner is not None:
+            K, k, z = self._rows(theta, x)
+            return np.einsum("mij,mj->mi", K, z) + k
         K, k, z = self._blocks(theta, x)
         return (np.einsum("cij,cmj->cmi", K, z) + k[:, None, :]).reshape(-1, self.nu)
 
     def vjp(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
+        P = self.policy.n_params
+        if self.owner is not None:
+            K, _, z = self._rows(theta, x)
+            g = np.asarray(g_u, float).reshape(z.shape[0], self.nu)
+            own = np.einsum("mi,mj->mij", g, z).reshape(z.shape[0], -1)
+            if self.policy.bias:
+                own = np.concatenate([own, g], axis=1)
+            g_th = np.zeros((z.shape[0], self.copies, P))
+            g_th[np.arange(z.shape[0]), self.owner] = own
+            g_x = np.einsum("mi,mij->mj", g, K) * self.policy.scale
+            return g_x, g_th.reshape(z.shape[0], -1)
         K, _, z = self._blocks(theta, x)
-        c, m, P = self.copies, z.shape[1], self.policy.n_params
+        c, m = self.copies, z.shape[1]
         g = np.asarray(g_u, float).reshape(c, m, self.nu)
         g_x = np.einsum("cmi,cij->cmj", g, K) * self.policy.scale
         own = np.einsum("cmi,cmj->cmij", g, z).reshape(c, m, -1)
@@ -237,6 +309,69 @@ class _ParameterBlocks:
     def jacobians(self, theta, x) -> tuple[np.ndarray, np.ndarray]:
         rows = [self.vjp(theta, x, np.broadcast_to(e, (len(x), self.nu))) for e in np.eye(self.nu)]
         return np.stack([r[0] for r in rows], 1), np.stack([r[1] for r in rows], 1)
+
+
+def perturbations(theta, delta, noise: float) -> np.ndarray:
+    """(2N, P) the perturbed parameters of one ARS iteration: row 2k is ``theta + nu delta_k``,
+    row 2k + 1 ``theta - nu delta_k`` (theta (P,), delta (N, P), nu = ``noise``)."""
+    theta = np.asarray(theta, dtype=float)
+    thetas = np.repeat(theta[None], 2 * len(delta), axis=0)
+    thetas[0::2] += noise * delta
+    thetas[1::2] -= noise * delta
+    return thetas
+
+
+@dataclass(frozen=True)
+class ArsUpdate:
+    """One ARS V2-t update (:func:`ars_update`).
+
+    Attributes:
+        theta: (P,) the updated parameters.
+        step: (P,) ``theta_new - theta``.
+        best: (b,) the directions used, best first.
+        sigma_R: the standard deviation of the 2b returns used (1 where they are all equal).
+    """
+
+    theta: np.ndarray
+    step: np.ndarray
+    best: np.ndarray
+    sigma_R: float
+
+
+def ars_update(theta, delta, returns, usable, top: int, step_size: float) -> ArsUpdate:
+    """The ARS V2-t update (Mania et al. 2018, Algorithm 2, lines 6-7; the module docstring's
+    steps 3-4): of the usable directions, the b = ``top`` with the largest ``max(r_k+, r_k-)``
+    (ties broken by the lower index), and::
+
+        theta_new = theta + alpha / (b sigma_R) sum_top (r_k+ - r_k-) delta_k
+
+    with sigma_R the (population) standard deviation of the 2b returns used.
+
+    Args:
+        theta: (P,) parameters.
+        delta: (N, P) the directions.
+        returns: (N, 2) the returns ``r_k+`` (column 0) and ``r_k-`` (column 1).
+        usable: (N,) bool: directions whose rollouts may be used.
+        top: b, directions used.
+        step_size: alpha.
+
+    Raises:
+        UnconvergedStepError: fewer than b usable directions.
+    """
+    R = np.asarray(returns, dtype=float)
+    ok = np.asarray(usable, dtype=bool)
+    b = int(top)
+    if int(ok.sum()) < b:
+        raise UnconvergedStepError(
+            f"ars_update: only {int(ok.sum())} direction(s) without unconverged steps, top = "
+            f"{b} needed"
+        )
+    idx = np.flatnonzero(ok)
+    best = idx[np.argsort(-R[idx].max(axis=1), kind="stable")[:b]]
+    sigma_R = float(R[best].std())
+    sigma_R = sigma_R if sigma_R > 0 else 1.0
+    step = step_size / (b * sigma_R) * ((R[best, 0] - R[best, 1]) @ delta[best])
+    return ArsUpdate(theta + step, step, best, sigma_R)
 
 
 @dataclass(frozen=True)
@@ -343,9 +478,7 @@ def ars_v2_train(
     for j in range(iterations):
         start = time.perf_counter()
         delta = rng.standard_normal((N, theta.size))
-        thetas = np.repeat(theta[None], 2 * N, axis=0)
-        thetas[0::2] += nu * delta
-        thetas[1::2] -= nu * delta
+        thetas = perturbations(theta, delta, nu)
         noises = [obj.noise(rng, m) for _ in range(N)]  # common to + and -
         noises = [xi for xi in noises for _ in (0, 1)]
         if evaluate:
@@ -354,17 +487,11 @@ def ars_v2_train(
         returns, used, states, alive = _evaluate(obj, policy, thetas, noises, batch_directions)
         R = returns[: 2 * N].reshape(N, 2, m).mean(axis=2)  # (N, 2): r+, r-
         ok = used[: 2 * N].reshape(N, 2 * m).all(axis=1)
-        if int(ok.sum()) < b:
-            raise UnconvergedStepError(
-                f"ars_v2_train: iteration {j}: only {int(ok.sum())} direction(s) without "
-                f"unconverged steps, top = {b} needed"
-            )
-        idx = np.flatnonzero(ok)
-        best = idx[np.argsort(-R[idx].max(axis=1), kind="stable")[:b]]
-        sigma_R = float(R[best].std())
-        sigma_R = sigma_R if sigma_R > 0 else 1.0
-        step = alpha / (b * sigma_R) * ((R[best, 0] - R[best, 1]) @ delta[best])
-        theta = theta + step
+        try:
+            update = ars_update(theta, delta, R, ok, b, alpha)
+        except UnconvergedStepError as err:
+            raise UnconvergedStepError(f"ars_v2_train: iteration {j}: {err}") from err
+        theta, step, sigma_R = update.theta, update.step, update.sigma_R
         train_used = used[: 2 * N]
         counted = alive[: 2 * N]  # steps before an episode ended
         if normalize:
@@ -403,7 +530,7 @@ def _evaluate(obj, policy, thetas, noises, batched):
     (C, m, H: False after an episode ended)."""
     C, m = len(thetas), noises[0].shape[0]
     if batched:
-        o = dataclasses.replace(obj, policy=_ParameterBlocks(policy, C))
+        o = dataclasses.replace(obj, policy=ParameterBlocks(policy, C))
         traj = o.rollout(thetas.reshape(-1), np.concatenate(noises), gradient=False)
         x = traj.x[:, :-1]
         return (traj.returns.reshape(C, m), traj.used.reshape(C, m),

@@ -24,9 +24,10 @@ from drake_abs.contact.step import contact_free_step
 from drake_abs.engine import LinearStepper, rollout
 from drake_abs.policy.ars_v2 import (
     PUBLISHED_SETTINGS,
+    SURVIVAL_SHIFT,
     NormalizedLinearPolicy,
+    ParameterBlocks,
     RunningMeanStd,
-    _ParameterBlocks,
     ars_v2_train,
 )
 from drake_abs.policy.estimators import PolicyObjective, first_order, zeroth_order
@@ -250,7 +251,11 @@ def test_normalized_linear_policy_and_parameter_blocks_have_the_jacobians_of_dif
     assert np.all(du_dx[:, :, 2] == 0)  # a zero-variance coordinate has weight 0
     for pol_, th in (
         (pol, theta),
-        (_ParameterBlocks(pol, 2), rng.standard_normal(2 * pol.n_params)),
+        (ParameterBlocks(pol, 2), rng.standard_normal(2 * pol.n_params)),
+        (
+            ParameterBlocks(pol, 3, owner=np.array([2, 0, 0, 1])),
+            rng.standard_normal(3 * pol.n_params),
+        ),
     ):
         du_dx, du_dth = pol_.jacobians(th, x)
         g = rng.standard_normal((4, NU))
@@ -315,7 +320,8 @@ def test_ars_v2_is_seeded_and_batched_equals_one_rollout_per_policy():
 
 
 def test_published_settings_run_and_bad_arguments_are_named():
-    assert set(PUBLISHED_SETTINGS) == {"Hopper-v1", "HalfCheetah-v1"}
+    assert set(PUBLISHED_SETTINGS) == {"Hopper-v1", "HalfCheetah-v1", "Walker2d-v1", "Ant-v1"}
+    assert set(SURVIVAL_SHIFT) == set(PUBLISHED_SETTINGS)
     obj = ars_objective()
     theta = np.zeros(obj.policy.n_params)
     for settings in PUBLISHED_SETTINGS.values():
