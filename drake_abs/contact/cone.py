@@ -4,7 +4,9 @@
   the k tangent directions that linearise each cone, the tangential regularization and the
   friction formulation (:data:`FORMULATIONS`). It fixes the layout of the step's LCP, d = nc +
   nt + nf rows: nc normal rows (m), k tangent rows per frictional contact (nt in all, m/s), one
-  cone row per frictional contact (nf in all, N s).
+  cone row per frictional contact (nf in all, N s). A *pinned* contact's normal impulse is
+  given, not solved for: the rows of a dry friction of known bound (a joint's ``frictionloss``,
+  :mod:`drake_abs.multibody.joint_friction`).
 - :class:`GeneratorMap`: the rows of the Anitescu formulation of a cone, one per generator
   ``n + alpha t_j``, and the maps between them and the Stewart-Trinkle layout.
 - :class:`GeneratorSmoothing`: a contact-level smoothing seen from those generator rows.
@@ -23,6 +25,13 @@ from drake_abs.contact.smoothing import Smoothing
 
 #: the friction formulations a :class:`FrictionCone` offers
 FORMULATIONS = ("stewart_trinkle", "anitescu")
+
+#: kappa, the diagonal (1 / (N s)^2 in a central path's units) of a pinned contact's normal
+#: row (``FrictionCone.pinned``): large, so that a smoothing's mu on that row (needed: with
+#: the rows around it smoothed and this one exact the interior point converges slowly, measured
+#: up to 1200 iterations on a dry-friction slider) moves its given impulse by no more than
+#: ``sqrt(mu / kappa)`` (3e-5 N s at mu = 1e-3).
+PINNED_STIFFNESS = 1e6
 
 
 @dataclass(frozen=True)
@@ -60,12 +69,22 @@ class FrictionCone:
               generators' tangential parts, so ``sum_j beta_j = alpha gamma`` always (a sticking
               contact carries cancelling pairs): only the net ``sum_j beta_j t_j`` (the step's
               ``friction_impulse``) is physical, not the sum of the betas.
+        pinned: (nc,) which contacts are pinned (None: none): a pinned contact's normal impulse
+            is given, ``g = -phi / kappa`` with ``kappa =`` :data:`PINNED_STIFFNESS`: its
+            normal row is ``kappa gamma + phi >= 0 perp gamma >= 0`` (no velocity: its ``Jn``
+            row must be 0), so ``gamma = g`` in the exact problem. Its rows take the contact's
+            mu as every contact's do (mu / h on its friction and cone rows); on the normal row
+            a central-path value mu moves gamma by ``mu / (kappa g)`` (at most ``sqrt(mu /
+            kappa)``), which kappa keeps negligible. With coefficient 1 its cone row reads
+            ``g - E^T beta >= 0``: a dry friction of bound g (N s) along its tangent rows.
+            Stewart-Trinkle only (the Anitescu generators have no such row).
     """
 
     coefficients: np.ndarray
     directions: int = 4
     regularization: float = 1e-8
     formulation: str = "stewart_trinkle"
+    pinned: np.ndarray | None = None
     _frictional: np.ndarray = field(init=False, repr=False, compare=False)
     _row_contact: np.ndarray = field(init=False, repr=False, compare=False)
     _mu_f: np.ndarray = field(init=False, repr=False, compare=False)
@@ -84,6 +103,18 @@ class FrictionCone:
             raise ValueError(
                 f"directions must be >= 2 for frictional contacts; got {self.directions}"
             )
+        pinned = np.zeros(coeff.size, dtype=bool) if self.pinned is None else self.pinned
+        pinned = np.asarray(pinned)
+        if pinned.shape != coeff.shape or pinned.dtype != bool:
+            raise ValueError(
+                f"pinned must be None or {coeff.size} booleans (one per contact); got {pinned!r}"
+            )
+        if pinned.any() and self.formulation != "stewart_trinkle":
+            raise ValueError(
+                "pinned contacts (a given normal impulse: joint dry friction) need the "
+                f"stewart_trinkle formulation; got formulation {self.formulation!r}"
+            )
+        object.__setattr__(self, "pinned", pinned)
         object.__setattr__(self, "coefficients", coeff)
         object.__setattr__(self, "directions", int(self.directions))
         fr = np.flatnonzero(frictional)
@@ -119,7 +150,9 @@ class FrictionCone:
         """The same cone under another friction formulation."""
         if formulation == self.formulation:
             return self
-        return FrictionCone(self.coefficients, self.directions, self.regularization, formulation)
+        return FrictionCone(
+            self.coefficients, self.directions, self.regularization, formulation, self.pinned
+        )
 
     @property
     def generators(self) -> GeneratorMap:

@@ -47,6 +47,10 @@ class Step:
         limit_impulse: (B, nl) the impulses of a rigid-body scene's joint-limit rows (N m s or
             N s; 0 where a row was left out), in the order of the stepper's ``limits.names``
             (None for other steppers).
+        joint_friction_impulse: (B, nj) the impulses of a rigid-body scene's dry joint friction
+            (N m s or N s, along each joint's velocity: between -h F and h F for a friction
+            bound F), in the order of the stepper's ``joint_friction.names`` (None for other
+            steppers).
         lcp: the solver's full result, where one LCP was solved for the whole batch.
     """
 
@@ -68,6 +72,7 @@ class Step:
     friction_impulse: np.ndarray | None = None
     active: np.ndarray | None = None
     limit_impulse: np.ndarray | None = None
+    joint_friction_impulse: np.ndarray | None = None
     lcp: object | None = None
 
     def first(self) -> Step:

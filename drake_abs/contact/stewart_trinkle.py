@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from drake_abs.contact.compliance import SoftRows
-from drake_abs.contact.cone import FrictionCone, expand_mu
+from drake_abs.contact.cone import PINNED_STIFFNESS, FrictionCone, expand_mu
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import Smoothing
 from drake_abs.contact.step_data import ContactStepResult, ParameterDerivatives, StepQuantities
@@ -33,7 +33,9 @@ def assemble_lcp(
 
     The cone's regularization applies to the tangent rows (relative to their mean diagonal), or
     with ``regularize_normal`` (the Anitescu generator rows) to every normal row, relative to
-    its own diagonal."""
+    its own diagonal. A pinned contact's normal row (its ``Jn`` row 0) gets the diagonal
+    :data:`~drake_abs.contact.cone.PINNED_STIFFNESS`: ``kappa gamma + phi >= 0 perp gamma >= 0``
+    (:class:`~drake_abs.contact.cone.FrictionCone`)."""
     fr = cone.frictional
     F, z, S = _assemble(
         np.asarray(quant.W, dtype=float),
@@ -48,6 +50,9 @@ def assemble_lcp(
         float(h),
         0 if regularize_normal else cone.sizes()[0],
     )
+    if cone.pinned.any():
+        pinned = np.flatnonzero(cone.pinned)
+        F[:, pinned, pinned] += PINNED_STIFFNESS
     return F, z, S
 
 

@@ -18,9 +18,11 @@ Run ``python -m drake_abs.multibody.builder SCENE...`` to print what a scene's p
 
 from __future__ import annotations
 
+import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 from pydrake.multibody.parsing import Parser
@@ -36,8 +38,8 @@ from drake_abs.multibody.drake_dynamics import (
     PointContact,
 )
 from drake_abs.multibody.geometry_contacts import PairContact
-from drake_abs.multibody.model_files import format_model_report, model_report
-from drake_abs.multibody.parsing import add_model_specs
+from drake_abs.multibody.model_files import format_model_report, model_report, read_mjcf
+from drake_abs.multibody.parsing import add_model_specs, resolve_model_file
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 from drake_abs.multibody.scene import Scene
 from drake_abs.multibody.scene_compliance import scene_compliance
@@ -60,11 +62,21 @@ class SceneModel:
         """The scene's initial state x = (q0, v0), shape (nq + nv,)."""
         return np.concatenate([self.q0, self.v0])
 
+    @functools.cached_property
+    def joint_friction(self) -> np.ndarray:
+        """The dry friction bound of each velocity (nv,) (N m or N; 0: none), from the scene's
+        MJCF files (:func:`scene_joint_friction`), which the step takes as complementarity rows
+        (:mod:`drake_abs.multibody.joint_friction`)."""
+        return scene_joint_friction(self.scene, self.plant)
+
     def model_report(self) -> dict:
         """What the plant holds of the scene's model files: per joint its coordinates, limits,
-        damping and armature, per actuator its gear and effort limit (see
-        :func:`drake_abs.multibody.model_files.model_report`)."""
-        return model_report(self.plant)
+        damping, armature, spring and dry friction (``frictionloss``, N m or N), per actuator
+        its gear and effort limit (see :func:`drake_abs.multibody.model_files.model_report`)."""
+        report = model_report(self.plant)
+        for joint in report["joints"]:
+            joint["frictionloss"] = float(self.joint_friction[joint["v_index"]])
+        return report
 
     def stepper(
         self,
@@ -96,10 +108,31 @@ class SceneModel:
             self.scene.activation_distance if activation_distance is None else activation_distance,
             self.scene.friction_model if friction is None else friction,
             compliance=scene_compliance(self.scene, self.contact_model),
-            **solver_options,
+            **{"joint_friction": self.joint_friction, **solver_options},
         )
         stepper.scene, stepper.rebuild = self.scene, rebuild_stepper  # picklable
         return stepper
+
+
+def scene_joint_friction(scene: Scene, plant: MultibodyPlant) -> np.ndarray:
+    """The dry friction bound of each velocity of ``plant`` (nv,) (N m or N; 0: none): every
+    MJCF joint's ``frictionloss`` (:func:`~drake_abs.multibody.model_files.read_mjcf`, with the
+    model's ``ignore``) on its joint's velocity, found in the model instance the file was parsed
+    into (the model's ``name``, else the file's ``<mujoco model>``). Other formats have none
+    (Drake drops a URDF joint's ``<dynamics friction>``, warning that it does not model it)."""
+    out = np.zeros(plant.num_velocities())
+    for i, spec in enumerate(scene.models):
+        path = resolve_model_file(spec, f"scene {scene.name!r}: models[{i}].file")
+        if path.suffix.lower() != ".xml":
+            continue
+        info = read_mjcf(path, spec.ignore)
+        if not info.frictionloss:
+            continue
+        name = spec.name or ElementTree.parse(path).getroot().get("model")
+        instance = plant.GetModelInstanceByName(name)
+        for joint, bound in info.frictionloss:
+            out[plant.GetJointByName(joint, instance).velocity_start()] += bound
+    return out
 
 
 def add_scene_models(
@@ -134,7 +167,8 @@ _REBUILT: dict[str, SceneModel] = {}
 
 def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
     """A pickled :class:`ComplementarityStepper` rebuilt from its scene and settings (smoothing,
-    gradient, activation_distance, friction, joint_limits, damping, solver options, and
+    gradient, activation_distance, friction, joint_limits, damping, springs, joint_friction,
+    compliance, solver options, and
     ``parameters``: the model parameters changed by
     :meth:`~ComplementarityStepper.with_parameters`, ``{name: value}``)."""
     key = scene.to_yaml()

@@ -19,11 +19,13 @@ scaled), actuator effort limits (Drake keeps ``ctrlrange`` in control units whil
 input is the joint torque: applied as ``gear * ctrlrange``, clipped by ``forcerange``), joint
 springs (``stiffness`` towards ``springref`` on hinge and slide joints: added to the plant as
 Drake's ``RevoluteSpring`` / ``PrismaticSpring`` force elements, which the step takes implicitly,
-:func:`drake_abs.multibody.joint_limits.joint_springs`), and ``<keyframe>`` (applied on
-request). What neither Drake nor this package models (dry joint friction, armature of an
-unactuated joint, springs on ball and free joints, tendons, equality constraints, actuators other
-than ``<motor>``) is refused, naming the element and attribute; joint attributes can be dropped
-explicitly (a scene's ``ignore``: ``joint.stiffness`` drops the springs too).
+:func:`drake_abs.multibody.joint_limits.joint_springs`), dry joint friction (``frictionloss`` on
+hinge and slide joints: read here, given to the step as complementarity rows,
+:mod:`drake_abs.multibody.joint_friction`), and ``<keyframe>`` (applied on request). What
+neither Drake nor this package models (armature of an unactuated joint, springs and dry friction
+on ball and free joints, tendons, equality constraints, actuators other than ``<motor>``) is
+refused, naming the element and attribute; joint attributes can be dropped explicitly (a scene's
+``ignore``: ``joint.stiffness`` drops the springs too, ``joint.frictionloss`` the friction).
 :func:`model_report` lists what a built plant holds.
 """
 
@@ -332,6 +334,9 @@ class MjcfInfo:
             stiffness > 0 (N m / rad or N / m; springref in rad or m, converted from degrees
             where ``<compiler angle="degree">``, MuJoCo's default), in file order; none when
             ``joint.stiffness`` is ignored.
+        frictionloss: ``(joint, frictionloss)`` of every hinge or slide joint with a
+            ``frictionloss`` > 0 (its dry friction bound, N m or N), in file order; none when
+            ``joint.frictionloss`` is ignored.
     """
 
     actuators: tuple[MjcfActuator, ...]
@@ -340,6 +345,7 @@ class MjcfInfo:
     keyframes: dict
     dropped: tuple[str, ...]
     springs: tuple[tuple[str, float, float], ...] = ()
+    frictionloss: tuple[tuple[str, float], ...] = ()
 
 
 _QPOS_SIZE = {"free": 7, "ball": 4, "slide": 1, "hinge": 1}
@@ -347,13 +353,14 @@ _QPOS_SIZE = {"free": 7, "ball": 4, "slide": 1, "hinge": 1}
 
 def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
     """Read what Drake's MJCF parser drops from the file at ``path`` (motors' effort limits,
-    ``settotalmass``, keyframes, the joints' springs: ``stiffness`` towards ``springref``), and
-    refuse what neither it nor the step models (``ValueError`` naming each element and
-    attribute): a joint's ``frictionloss`` (dry friction), ``armature`` on a joint with no motor
-    (Drake keeps armature only as a motor's reflected inertia) or ``stiffness`` on a ball or free
-    joint, unless ``ignore`` lists ``"joint.frictionloss"``, ``"joint.armature"`` or
-    ``"joint.stiffness"`` (they are then dropped, and listed in ``dropped``;
-    ``"joint.stiffness"`` drops every spring); actuators other than ``<motor>`` on a joint, a
+    ``settotalmass``, keyframes, the joints' springs: ``stiffness`` towards ``springref``, and
+    their dry friction, ``frictionloss``), and refuse what neither it nor the step models
+    (``ValueError`` naming each element and attribute): ``armature`` on a joint with no motor
+    (Drake keeps armature only as a motor's reflected inertia), ``stiffness`` or
+    ``frictionloss`` on a ball or free joint (or negative), unless ``ignore`` lists
+    ``"joint.armature"``, ``"joint.stiffness"`` or ``"joint.frictionloss"`` (they are then
+    dropped, and listed in ``dropped``; ``"joint.stiffness"`` drops every spring,
+    ``"joint.frictionloss"`` every friction); actuators other than ``<motor>`` on a joint, a
     multi-component ``gear``, asymmetric ``ctrlrange`` or ``forcerange``, tendons and equality
     constraints, always."""
     path = Path(path)
@@ -402,7 +409,7 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
             actuators.append(MjcfActuator(name, joint, gear[0], abs(gear[0]) * limit))
             actuated.add(joint)
 
-    joints, springs = [], []
+    joints, springs, friction = [], [], []
     parents = {child: parent for parent in root.iter() for child in parent}
     for world in root.findall("worldbody"):
         for body in world.iter("body"):
@@ -438,16 +445,20 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
                         if kind == "hinge" and degrees:
                             ref = float(np.deg2rad(ref))
                         springs.append((name, float(stiffness[0]), float(ref)))
-                for attr, key, what in (
-                    ("frictionloss", "joint.frictionloss", "dry joint friction"),
-                    ("armature", "joint.armature", "armature of a joint no motor drives"),
-                ):
-                    text = defaults.get(joint, "joint", cls, attr)
-                    value = _floats(text, f"{where} {attr}")
-                    if attr == "armature" and name in actuated:
-                        continue  # Drake: the motor's reflected inertia
-                    if value and value[0] != 0:
-                        problems.append((key, f"{where}: {attr}={text} ({what})"))
+                loss = _floats(defaults.get(joint, "joint", cls, "frictionloss"),
+                               f"{where} frictionloss")  # fmt: skip
+                if loss and loss[0] != 0:
+                    if loss[0] < 0 or kind not in ("hinge", "slide"):
+                        problems.append(("joint.frictionloss", f"{where}: frictionloss="
+                                         f"{loss[0]:g} (dry friction on a {kind} joint; on "
+                                         "hinge and slide joints only, >= 0)"))  # fmt: skip
+                    else:
+                        friction.append((name, float(loss[0])))
+                text = defaults.get(joint, "joint", cls, "armature")
+                value = _floats(text, f"{where} armature")
+                if value and value[0] != 0 and name not in actuated:  # else Drake: the motor's
+                    problems.append(("joint.armature", f"{where}: armature={text} (armature of "
+                                     "a joint no motor drives)"))  # fmt: skip
     for tag in ("tendon", "equality"):
         for block in root.findall(tag):
             for element in block:
@@ -480,7 +491,15 @@ def read_mjcf(path: str | Path, ignore: tuple[str, ...] = ()) -> MjcfInfo:
     if "joint.stiffness" in ignore:
         dropped += tuple(f"joint {n!r}: stiffness={k:g} (a joint spring)" for n, k, _ in springs)
         springs = []
-    return MjcfInfo(tuple(actuators), total_mass, tuple(joints), keyframes, dropped, tuple(springs))
+    if "joint.frictionloss" in ignore:
+        dropped += tuple(
+            f"joint {n!r}: frictionloss={f:g} (dry joint friction)" for n, f in friction
+        )
+        friction = []
+    return MjcfInfo(
+        tuple(actuators), total_mass, tuple(joints), keyframes, dropped, tuple(springs),
+        tuple(friction),
+    )  # fmt: skip
 
 
 def _mjcf_with_total_mass(path: Path, total_mass: float) -> str:
@@ -679,16 +698,17 @@ def model_report(plant: MultibodyPlant) -> dict:
 
 
 def format_model_report(report: dict) -> str:
-    """:func:`model_report` as a text table."""
+    """:func:`model_report` as a text table (with each joint's dry friction where the report
+    has it: :meth:`drake_abs.multibody.builder.SceneModel.model_report`)."""
     lines = [f"total mass {report['mass']:.6g} kg", "joints:"]
     lines.append(f"  {'name':24s} {'type':20s} {'q':>3s} {'v':>3s} {'lower':>10s} {'upper':>10s} "
                  f"{'damping':>9s} {'armature':>9s} {'stiffness':>9s} "
-                 f"{'springref':>9s}")  # fmt: skip
+                 f"{'springref':>9s} {'friction':>9s}")  # fmt: skip
     for j in report["joints"]:
         lines.append(
             f"  {j['name']:24s} {j['type']:20s} {j['q_index']:3d} {j['v_index']:3d} "
             f"{j['lower']:10.4g} {j['upper']:10.4g} {j['damping']:9.4g} {j['armature']:9.4g} "
-            f"{j['stiffness']:9.4g} {j['springref']:9.4g}"
+            f"{j['stiffness']:9.4g} {j['springref']:9.4g} {j.get('frictionloss', 0.0):9.4g}"
         )
     lines.append("actuators:")
     lines.append(f"  {'name':24s} {'joint':24s} {'gear':>8s} {'effort limit':>13s}")

@@ -29,6 +29,7 @@ from drake_abs.contact.step import Step
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
 from drake_abs.multibody.drake_dynamics import ContactModelBase
 from drake_abs.multibody.floating import normalize_quaternions
+from drake_abs.multibody.joint_friction import JointFrictionRows, JointFrictionSmoothing
 from drake_abs.multibody.joint_limits import (
     JointLimitRows,
     effort_limits,
@@ -60,13 +61,15 @@ class ContactProblem:
         quantities: the step's :class:`~drake_abs.contact.step_data.StepQuantities` (no
             state derivatives): W and v_free of the damped step (joint damping and springs
             taken implicitly), distances ``phi`` (m) and
-            rows ``Jn`` of the ``n_contacts`` candidates followed by the joint-limit rows,
-            tangent rows ``Jt``.
+            rows ``Jn`` of the ``n_contacts`` candidates followed by the joint-limit rows and
+            the joint-friction rows (pinned: :mod:`drake_abs.multibody.joint_friction`),
+            tangent rows ``Jt`` (the candidates', then the joint frictions').
         cone: the friction cone over those rows (joint-limit rows frictionless).
         h: the time step (s).
         parameters: derivatives in the model parameters ``theta_names`` (None unless asked).
         theta_names: the columns of ``parameters``.
-        n_contacts: the number of contact candidates (the rows after them are joint limits).
+        n_contacts: the number of contact candidates (the rows after them are joint limits,
+            then joint friction).
     """
 
     quantities: StepQuantities
@@ -106,6 +109,13 @@ class ComplementarityStepper:
             ``PrismaticSpring`` force elements: an MJCF joint's ``stiffness``, an SDF joint's
             ``spring_stiffness``; :func:`~drake_abs.multibody.joint_limits.joint_springs`),
             implicitly like the damping (:mod:`drake_abs.contact.damping`).
+        joint_friction: dry friction bound per velocity (nv,) (N m or N; 0 or None: none), e.g.
+            the MJCF joints' ``frictionloss``
+            (:attr:`drake_abs.multibody.builder.SceneModel.joint_friction`, which
+            :meth:`~drake_abs.multibody.builder.SceneModel.stepper` passes): complementarity
+            rows in the same LCP as the contacts and joint limits, smoothed by the same policy
+            (:mod:`drake_abs.multibody.joint_friction`; Stewart-Trinkle only). The step's
+            ``joint_friction_impulse`` holds their impulses.
         compliance: soft contact as MuJoCo's (solref, solimp, margin per candidate;
             :class:`~drake_abs.contact.compliance.ContactCompliance`), or None (default) for
             hard contact. A soft candidate has rows only while its distance is below its
@@ -123,6 +133,7 @@ class ComplementarityStepper:
         joint_limits: bool = True,
         damping: bool = True,
         springs: bool = True,
+        joint_friction: np.ndarray | None = None,
         compliance: ContactCompliance | None = None,
         **solver_options,
     ):
@@ -148,6 +159,12 @@ class ComplementarityStepper:
             "damping": bool(damping),
             "springs": bool(springs),
         }
+        self.joint_friction = JointFrictionRows.of(plant, joint_friction)
+        if self.joint_friction.size and friction != "stewart_trinkle":
+            raise ValueError(
+                "joint_friction (dry joint friction rows) needs friction='stewart_trinkle'; got "
+                f"friction={friction!r}"
+            )
         if compliance is not None and compliance.size != len(model.contacts):
             raise ValueError(
                 f"compliance must have one entry per contact candidate ({len(model.contacts)}); "
@@ -198,6 +215,10 @@ class ComplementarityStepper:
         )  # fmt: skip
         if self.compliance is not None:
             settings["compliance"] = self.compliance
+        if self.joint_friction.size:
+            bound = np.zeros(self.sizes[1])
+            bound[self.joint_friction.v_index] = self.joint_friction.bound
+            settings["joint_friction"] = bound
         if self._parameters:  # a stepper of with_parameters: the scene's, then its changes
             settings["parameters"] = dict(self._parameters)
         return self.rebuild, (self.scene, settings)
@@ -420,10 +441,10 @@ class ComplementarityStepper:
         self, x: np.ndarray, u: np.ndarray, *, parameters: bool | Sequence[str] = True
     ) -> ContactProblem:
         """The dynamics one step's LCP is built from, at states x (B, nq + nv) and inputs
-        u (B, nu) or (nu,), with every contact candidate and joint-limit row included (no
-        pruning) and the inputs clipped to the effort limits as :meth:`step` does: the inverse
-        mass matrix and free velocity of the (damped) step, the distances and rows, the
-        friction cone; with ``parameters`` (True, or some names), their derivatives in
+        u (B, nu) or (nu,), with every contact candidate, joint-limit and joint-friction row
+        included (no pruning) and the inputs clipped to the effort limits as :meth:`step` does:
+        the inverse mass matrix and free velocity of the (damped) step, the distances and rows,
+        the friction cone; with ``parameters`` (True, or some names), their derivatives in
         :attr:`parameter_names` (or those names).
 
         This is what a loss that does not solve the step needs (the violation-implicit loss of
@@ -434,37 +455,44 @@ class ComplementarityStepper:
         q, v = x[:, :nq], x[:, nq:]
         idx = np.arange(nc)
         lidx = np.arange(self.limits.size)
+        fidx = np.arange(self.joint_friction.size)
         quant = self.model.quantities(
             q, v, u, idx, derivatives=False, damping=self._damping, springs=self._springs
         )
         cone = self._cone(idx, lidx.size)
         names = parameter_columns(parameters, lambda: self.parameter_names)
         par = parameter_derivatives(self.model, idx, cone, q, v, u, names) if names else None
-        quant, par = self._joint_rows(quant, par, q, lidx, False, names)
+        quant, par = self._joint_rows(quant, par, q, lidx, False, names, fidx)
+        cone = self._cone(idx, lidx.size, fidx.size)
         return ContactProblem(quant, cone, float(self.model.h), par, names, nc)
 
-    def _cone(self, idx: np.ndarray, n_limits: int = 0) -> FrictionCone:
+    def _cone(self, idx: np.ndarray, n_limits: int = 0, n_friction: int = 0) -> FrictionCone:
         """The friction cone of the candidates ``idx`` under this stepper's formulation, with
-        ``n_limits`` frictionless joint-limit rows after them."""
+        ``n_limits`` frictionless joint-limit rows after them, then ``n_friction`` joint-friction
+        rows (pinned contacts of coefficient 1: :mod:`drake_abs.multibody.joint_friction`)."""
         cone = self.model.cone_for(idx)
-        if cone.formulation == self.friction and n_limits == 0:
+        if cone.formulation == self.friction and n_limits == 0 and n_friction == 0:
             return cone
         cache = self.__dict__.setdefault("_cones", {})
-        key = (np.asarray(idx, dtype=np.int64).tobytes(), n_limits)
+        key = (np.asarray(idx, dtype=np.int64).tobytes(), n_limits, n_friction)
         if key not in cache:
-            coefficients = np.concatenate([cone.coefficients, np.full(n_limits, np.nan)])
+            coefficients = np.concatenate(
+                [cone.coefficients, np.full(n_limits, np.nan), np.ones(n_friction)]
+            )
+            pinned = np.arange(coefficients.size) >= coefficients.size - n_friction
             cache[key] = FrictionCone(
-                coefficients, cone.directions, cone.regularization, self.friction
+                coefficients, cone.directions, cone.regularization, self.friction, pinned
             )
         return cache[key]
 
-    def _joint_rows(self, quant, par, q, lidx: np.ndarray, jacobians: bool, names=()):
+    def _joint_rows(self, quant, par, q, lidx: np.ndarray, jacobians: bool, names=(), fidx=None):
         """One group's quantities with the joint-limit rows ``lidx`` appended to the contact
         rows (frictionless; their distances and rows do not depend on the model parameters),
-        and the model-parameter derivatives (columns ``names``) carried to the damped step (the
-        provider took the joint damping and springs: ``quantities(..., damping=...,
-        springs=...)``), with the damping's and springs' own columns
-        (:func:`~drake_abs.multibody.parameters.damping_columns`)."""
+        then the joint-friction rows ``fidx`` (pinned normal rows, and their tangent rows after
+        the contacts'; constant), and the model-parameter derivatives (columns ``names``)
+        carried to the damped step (the provider took the joint damping and springs:
+        ``quantities(..., damping=..., springs=...)``), with the damping's and springs' own
+        columns (:func:`~drake_abs.multibody.parameters.damping_columns`)."""
         if lidx.size:
             P = quant.dphi.shape[-1] if jacobians else None
             phi, J, dphi, dJ = self.limits.rows(q, lidx, self.sizes[1], P)
@@ -485,6 +513,8 @@ class ComplementarityStepper:
                     rows = np.zeros((q.shape[0], lidx.size) + par.dJn.shape[2:])
                     padded["dJn"] = np.concatenate([par.dJn, rows], axis=1)
                 par = replace(par, **padded)
+        if fidx is not None and fidx.size:
+            quant, par = self._friction_rows(quant, par, fidx, jacobians)
         if par is None:
             return quant, par
         h = self.model.h
@@ -495,6 +525,47 @@ class ComplementarityStepper:
         return quant, damping_columns(
             par, quant, names, self._damping_joints, h, self.springs, self._spring_joints
         )
+
+    def _friction_rows(self, quant, par, fidx: np.ndarray, jacobians: bool):
+        """``quant`` and ``par`` with the joint-friction rows ``fidx`` appended (see
+        :meth:`_joint_rows`): normal rows after the others, tangent rows after the others;
+        their parameter derivatives are 0 (their cone rows' coefficient is no parameter)."""
+        B, nv = quant.v.shape
+        k = self.model.cone.directions
+        P = quant.dphi.shape[-1] if jacobians else None
+        f = self.joint_friction.rows(fidx, B, nv, k, self.model.h, P)
+        extra = {
+            "phi": np.concatenate([quant.phi, f["phi"]], axis=1),
+            "Jn": np.concatenate([quant.Jn, f["Jn"]], axis=1),
+            "Jt": np.concatenate([quant.Jt, f["Jt"]], axis=1),
+        }
+        if jacobians:
+            for name in ("dphi", "dJn", "dJt"):
+                extra[name] = np.concatenate([getattr(quant, name), f[name]], axis=1)
+        quant = replace(quant, **extra)
+        if par is not None:
+            T, r = par.dphi.shape[-1], fidx.size
+            padded = {
+                "dphi": np.concatenate([par.dphi, np.zeros((B, r, T))], axis=1),
+                "dfriction": np.concatenate([par.dfriction, np.zeros((r, T))], axis=0),
+            }
+            if par.dJn is not None:
+                padded["dJn"] = np.concatenate([par.dJn, np.zeros((B, r, nv, T))], axis=1)
+            if par.dJt is not None:
+                padded["dJt"] = np.concatenate([par.dJt, np.zeros((B, r * k, nv, T))], axis=1)
+            par = replace(par, **padded)
+        return quant, par
+
+    def _smoothing_for(self, quant, n_rows: int, fidx: np.ndarray) -> Smoothing:
+        """The smoothing of a group whose last ``fidx.size`` of its ``n_rows`` normal rows are
+        joint friction (:class:`~drake_abs.multibody.joint_friction.JointFrictionSmoothing`,
+        with each joint's compliance ``h W_jj`` at the group's states); this stepper's own
+        smoothing for a group without."""
+        if not fidx.size:
+            return self.smoothing
+        v = self.joint_friction.v_index[fidx]
+        rows = np.arange(n_rows - fidx.size, n_rows)
+        return JointFrictionSmoothing(self.smoothing, rows, self.model.h * quant.W[:, v, v])
 
     def _solve(self, q, v, u, active, groups, jacobians: bool, parameters: tuple) -> dict:
         """The step of states (q, v, u) with the candidates ``active`` (B, nc + nl: contacts,
@@ -507,6 +578,7 @@ class ComplementarityStepper:
             "impulse": np.zeros((B, nc)),
             "friction_impulse": np.zeros((B, nc, 3)),
             "limit_impulse": np.zeros((B, self.limits.size)),
+            "joint_friction_impulse": np.zeros((B, self.joint_friction.size)),
             "mu": np.zeros((B, nc)),
             "converged": np.ones(B, dtype=bool),
             "iterations": np.zeros(B, dtype=np.int64),
@@ -523,6 +595,7 @@ class ComplementarityStepper:
             out.update(dx_dtheta=np.empty((B, nq + nv, T)), dimpulse_dtheta=np.zeros((B, nc, T)))
         if groups is None:
             groups = _groups_by_active_set(active)
+        fidx = np.arange(self.joint_friction.size)  # always in the LCP
         for rows, both, quant in groups:
             idx, lidx = (
                 (both[both < nc], both[both >= nc] - nc) if self.limits.size else (both, both[:0])
@@ -532,21 +605,23 @@ class ComplementarityStepper:
                     q[rows], v[rows], u[rows], idx, derivatives=jacobians, damping=self._damping,
                     springs=self._springs,
                 )  # fmt: skip
-            cone = self._cone(idx, lidx.size)
             par = None
             if parameters:
                 par = parameter_derivatives(
-                    self.model, idx, cone, q[rows], v[rows], u[rows], parameters
-                )
-            quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians, parameters)
+                    self.model, idx, self._cone(idx, lidx.size), q[rows], v[rows], u[rows],
+                    parameters,
+                )  # fmt: skip
+            quant, par = self._joint_rows(quant, par, q[rows], lidx, jacobians, parameters, fidx)
+            cone = self._cone(idx, lidx.size, fidx.size)
             soft = None
             if self.compliance is not None:  # the group's contacts soft, its limit rows hard
                 soft = self.compliance.rows(
-                    idx, lidx.size, cone.coefficients[: idx.size], self.friction,
+                    idx, lidx.size + fidx.size, cone.coefficients[: idx.size], self.friction,
                     cone.directions, self.model.h,
                 )  # fmt: skip
+            smoothing = self._smoothing_for(quant, cone.sizes()[0], fidx)
             r = contact_step(
-                quant, cone, self.model.h, self.smoothing, gradient=self.gradient,
+                quant, cone, self.model.h, smoothing, gradient=self.gradient,
                 parameters=par, compliance=soft, **self.solver_options,
             )  # fmt: skip
             if jacobians and r.dx_du.shape[-1] != nu:  # the (q, v, u) columns, checked
@@ -554,7 +629,7 @@ class ComplementarityStepper:
                     f"the dynamics provider's derivatives have {r.dx_du.shape[-1]} input "
                     f"columns after (q, v); the model has nu = {nu}"
                 )
-            self._scatter(out, rows, idx, lidx, cone, r, jacobians)
+            self._scatter(out, rows, idx, lidx, fidx, cone, r, jacobians)
         return out
 
     def _repair(self, q, v, u, active, out, jacobians: bool, parameters: tuple) -> None:
@@ -595,11 +670,14 @@ class ComplementarityStepper:
             for key, value in sub.items():
                 out[key][rows] = value
 
-    def _scatter(self, out, rows, idx, lidx, cone, r, jacobians) -> None:
+    def _scatter(self, out, rows, idx, lidx, fidx, cone, r, jacobians) -> None:
         """Write one group's step into the batch outputs (rows: a slice or row indices). The
-        group's normal rows are its contacts ``idx``, then its joint-limit rows ``lidx``."""
+        group's normal rows are its contacts ``idx``, then its joint-limit rows ``lidx``, then
+        its joint-friction rows ``fidx``; its tangent rows, the frictional contacts', then the
+        joint frictions'."""
         nc_g, nt, _ = cone.sizes()
         k = idx.size  # the group's contact rows; its limit rows follow them
+        nl = lidx.size
         nq = r.q_next.shape[1]
         out["x_next"][rows, :nq] = r.q_next
         out["x_next"][rows, nq:] = r.v_next
@@ -614,13 +692,14 @@ class ComplementarityStepper:
         out["iterations"][rows] = r.lcp.iterations
         # rows x contacts blocks: index the rows first (a view for a slice, a copy otherwise)
         whole = isinstance(rows, slice)
-        fr = idx[cone.frictional]
+        fr = idx[cone.frictional[cone.frictional < k]]
         beta = r.lam[:, nc_g : nc_g + nt].reshape(r.lam.shape[0], -1, cone.directions)
         blocks = [
             ("impulse", idx, r.lam[:, :k]),
-            ("limit_impulse", lidx, r.lam[:, k:nc_g]),
+            ("limit_impulse", lidx, r.lam[:, k : k + nl]),
             ("mu", idx, r.mu[:, :k]),
-            ("friction_impulse", fr, beta @ self.model.tangents),
+            ("friction_impulse", fr, beta[:, : fr.size] @ self.model.tangents),
+            ("joint_friction_impulse", fidx, self.joint_friction.impulses(beta[:, fr.size :])),
         ]
         if jacobians:
             blocks += [

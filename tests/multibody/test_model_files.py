@@ -241,8 +241,10 @@ def test_half_cheetah_springs_come_from_the_file_unless_ignored():
 @pytest.mark.parametrize(
     ("extra", "joint", "match"),
     [
-        ("", '<joint name="h" type="slide" axis="0 0 1" frictionloss="1"/>',
-         r"joint 'h': frictionloss=1"),
+        ("", '<joint name="h" type="ball" frictionloss="1"/>',
+         r"joint 'h': frictionloss=1 \(dry friction on a ball joint"),
+        ("", '<joint name="h" type="slide" axis="0 0 1" frictionloss="-1"/>',
+         r"joint 'h': frictionloss=-1"),
         ("", '<joint name="h" type="slide" axis="0 0 1" armature="0.5"/>',
          r"joint 'h': armature=0.5 \(armature of a joint no motor drives\)"),
         ('<actuator><position joint="h" kp="10"/></actuator>',
@@ -262,9 +264,13 @@ def test_what_the_step_does_not_model_is_refused(tmp_path, extra, joint, match):
 
 def test_ignore_drops_the_listed_attributes_and_says_so(tmp_path):
     path = _mjcf(tmp_path, joint='<joint name="h" type="slide" axis="0 0 1" frictionloss="1"/>')
+    assert read_mjcf(path).frictionloss == (("h", 1.0),)  # read: the step takes it
+    assert build_scene_model(_scene(path)).joint_friction.tolist() == [1.0]
     info = read_mjcf(path, ("joint.frictionloss",))
     assert info.dropped == ("joint 'h': frictionloss=1 (dry joint friction)",)
-    assert build_scene_model(_scene(path, ignore=["joint.frictionloss"])).q0.tolist() == [0.0]
+    assert info.frictionloss == ()
+    dropped = build_scene_model(_scene(path, ignore=["joint.frictionloss"]))
+    assert dropped.q0.tolist() == [0.0] and dropped.joint_friction.tolist() == [0.0]
 
 
 def test_motor_effort_limit_is_gear_times_the_smaller_of_ctrl_and_force_range(tmp_path):
