@@ -194,6 +194,13 @@ class GeneratorMap:
 
     @classmethod
     def of(cls, cone: FrictionCone) -> GeneratorMap:
+        """The generator rows of ``cone``; a ValueError for a cone with pinned contacts (a
+        given normal impulse has no generators: ``FrictionCone.pinned``)."""
+        if cone.pinned.any():
+            raise ValueError(
+                "cone has pinned contacts (dry joint friction): they have no Anitescu "
+                "generator rows; use the Stewart-Trinkle rows"
+            )
         nc, nt, nf = cone.sizes()
         k = cone.directions
         order = {c: f for f, c in enumerate(cone.frictional)}

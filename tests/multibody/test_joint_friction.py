@@ -122,6 +122,11 @@ def test_frictionloss_on_a_ball_joint_is_refused_and_anitescu_is_refused(tmp_pat
         sm.stepper(friction="anitescu")
     with pytest.raises(ValueError, match="joint_friction must be 1 finite numbers >= 0"):
         sm.stepper(joint_friction=np.array([-1.0]))
+    # what needs the Anitescu generators of the step's rows refuses the pinned rows by name
+    cone = sm.stepper().contact_problem(np.zeros((1, 2)), np.zeros(1), parameters=False).cone
+    assert cone.pinned.tolist() == [False, True]  # the (far) contact, then the friction row
+    with pytest.raises(ValueError, match="pinned contacts"):
+        _ = cone.generators
 
 
 @pytest.mark.parametrize("smoothing", ["exact", "bs", "abs", "gauss"])
