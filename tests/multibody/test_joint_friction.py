@@ -56,7 +56,9 @@ def _write(tmp_path, template, name, **values):
     return path
 
 
-def _model(tmp_path, template, name, *, contact=None, friction_directions=2, **values):
+def _model(
+    tmp_path, template, name, *, contact=None, friction_directions=2, dynamics="auto", **values
+):
     path = _write(tmp_path, template, name, **values)
     body = "block" if template is SLIDER else "arm"
     point = [0.0, 0.0, 0.0] if template is SLIDER else [0.0, 0.0, -0.5]
@@ -65,6 +67,7 @@ def _model(tmp_path, template, name, *, contact=None, friction_directions=2, **v
         "contacts": [{"body": body, "points": [point], "radius": 0.05, "friction": 0.5}],
         "ground_height": -10.0 if contact is None else contact,
         "activation_distance": 0.1, "friction_directions": friction_directions,
+        "dynamics": dynamics,
     }  # fmt: skip
     return build_scene_model(Scene.from_dict(data))
 
@@ -241,11 +244,12 @@ def test_step_jacobians_match_central_differences_away_from_the_switch(tmp_path,
         assert np.abs(r.dx_du[0]).max() < 1e-6
 
 
-def test_friction_limit_and_contact_rows_share_one_lcp(tmp_path):
+@pytest.mark.parametrize("dynamics", ["pinocchio", "drake"])
+def test_friction_limit_and_contact_rows_share_one_lcp(tmp_path, dynamics):
     """Swung hard into its upper stop (1.2 rad) with friction: the stop and the friction act
     in the same step, the bob never passes the stop, and the Jacobian (with a limit row and
-    the friction rows in the LCP) matches central differences."""
-    stepper = _model(tmp_path, PENDULUM, "pendulum", F=0.5).stepper()
+    the friction rows in the LCP) matches central differences, with either provider."""
+    stepper = _model(tmp_path, PENDULUM, "pendulum", F=0.5, dynamics=dynamics).stepper()
     x, u = np.array([1.15, 9.0]), np.array([2.0])
     r = stepper.step(x[None], u)
     assert r.converged.all() and r.limit_impulse[0, 1] > 1e-3
