@@ -40,13 +40,14 @@ from pathlib import Path
 import numpy as np
 
 from drake_abs.experiments import outputs
+from drake_abs.policy.ars_trainer import ArsConfig
 from drake_abs.policy.methods import method as registry_method
 from drake_abs.policy.shac import ShacConfig
 from drake_abs.tasks.training_runs import RunSettings
 
 NAME = "gym-locomotion"
 TASKS = ("hopper", "half_cheetah")
-METHODS = ("shac_abs",)
+METHODS = ("shac_abs", "ars")
 
 
 @dataclass(frozen=True)
@@ -86,8 +87,9 @@ class Config:
     def test_size(cls) -> Config:
         shac = ShacConfig(envs=4, window=4, episode_length=20, critic_hidden=(8,),
                           critic_epochs=2, critic_minibatches=2)  # fmt: skip
-        return cls(tasks=("hopper",), methods=("shac_abs",), seeds=(0,), env_steps=160,
-                   settings=RunSettings(shac=shac), evaluations=3, score_seeds=2,
+        ars = ArsConfig(directions=2, top=1, episode_length=20)
+        return cls(tasks=("hopper",), methods=("shac_abs", "ars"), seeds=(0,), env_steps=160,
+                   settings=RunSettings(shac=shac, ars=ars), evaluations=3, score_seeds=2,
                    episode_steps=20, checkpoint_every=2)  # fmt: skip
 
     def check(self) -> None:

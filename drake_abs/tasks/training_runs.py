@@ -22,6 +22,11 @@ The trainers, by the registry's ``estimator``:
   hard contact). The task's reward for training has the smooth survive term
   (:class:`~drake_abs.tasks.locomotion.SmoothHealthy`) where the task has a healthy range and
   ``smooth_survive`` is set; the trainer also logs the task's own (gymnasium's) reward.
+- ``"ars"``: :class:`~drake_abs.policy.ars_trainer.ArsTrainer`, ARS V2-t as its authors run it
+  on gymnasium's tasks (their published settings and survival shift for the task,
+  :meth:`~drake_abs.policy.ars_trainer.ArsConfig.published`, unless ``settings.ars`` gives
+  others), on the exact plant (a derivative-free method needs no smoothing) with gymnasium's
+  reward.
 
 :class:`RunSettings` holds what defines a run besides its task, method and seed.
 """
@@ -32,6 +37,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
 
+from drake_abs.policy.ars_trainer import ArsConfig, ArsTrainer
 from drake_abs.policy.methods import method as registry_method
 from drake_abs.policy.policy_files import PolicyFile
 from drake_abs.policy.shac import ShacConfig, ShacTrainer
@@ -45,7 +51,15 @@ from drake_abs.tasks.locomotion import (
 )
 from drake_abs.tasks.published_policies import task_policy_file
 
-__all__ = ["RunSettings", "ShacRun", "TrainingRun", "resume_run", "start_run", "training_task"]
+__all__ = [
+    "ArsRun",
+    "RunSettings",
+    "ShacRun",
+    "TrainingRun",
+    "resume_run",
+    "start_run",
+    "training_task",
+]
 
 #: the registry's trainers this module runs (see the module docstring)
 SHAC_TRAINERS = ("shac", "fopg_episode")
@@ -89,6 +103,7 @@ class RunSettings:
             ``fopg_episode``, replace ``window``, ``critic`` and ``gamma``).
         control_period: seconds per action; None: gymnasium's.
         substeps: plant steps per action; None: the task's default.
+        ars: ARS's settings; None: the published ones of the task.
     """
 
     policy: Literal["linear", "mlp"] = "linear"
@@ -98,10 +113,13 @@ class RunSettings:
     shac: ShacConfig = field(default_factory=ShacConfig)
     control_period: float | None = None
     substeps: int | None = None
+    ars: ArsConfig | None = None
 
     def __post_init__(self):
         if self.policy not in ("linear", "mlp"):
             raise ValueError(f"policy must be 'linear' or 'mlp'; got {self.policy!r}")
+        if self.ars is not None and not isinstance(self.ars, ArsConfig):
+            raise ValueError(f"ars must be an ArsConfig or None; got {type(self.ars).__name__}")
         if not isinstance(self.shac, ShacConfig):
             raise ValueError(f"shac must be a ShacConfig; got {type(self.shac).__name__}")
         if len(self.contact_aware) != 2 or len(self.survive_width) != 2:
@@ -198,6 +216,52 @@ class ShacRun:
         return task_policy_file(self.task, policy, self.trainer.state.theta, **(meta | metadata))
 
 
+class ArsRun:
+    """An :class:`~drake_abs.policy.ars_trainer.ArsTrainer` run (the ``ars`` method) as a
+    :class:`TrainingRun`, on the exact plant with gymnasium's reward."""
+
+    def __init__(self, task_name: str, method: str, seed: int, settings: RunSettings):
+        if registry_method(method).estimator != "ars":
+            raise ValueError(f"method must be an ARS method; got {method!r}")
+        self.task_name, self.method, self.seed, self.settings = task_name, method, seed, settings
+        self.task = locomotion_task(task_name, control_period=settings.control_period,
+                                    substeps=settings.substeps)  # fmt: skip
+        config = settings.ars or ArsConfig.published(self.task.env_id)
+        self.trainer = ArsTrainer(self.task, config, seed)
+
+    @property
+    def env_steps(self) -> int:
+        return int(self.trainer.state.env_steps)
+
+    @property
+    def seconds(self) -> float:
+        return float(self.trainer.state.seconds)
+
+    @property
+    def rows(self) -> list[dict]:
+        return self.trainer.state.rows
+
+    @property
+    def recent_return(self) -> float | None:
+        """Mean return (gymnasium's reward) of the last iteration's episodes."""
+        return self.rows[-1]["return_mean"] if self.rows else None
+
+    def iterate(self) -> dict:
+        return self.trainer.iterate()
+
+    def save(self, path: str | Path) -> None:
+        self.trainer.save(path)
+
+    def load(self, path: str | Path) -> ArsRun:
+        self.trainer = ArsTrainer.load(path, self.task)
+        return self
+
+    def policy_file(self, **metadata) -> PolicyFile:
+        meta = {"method": self.method, "seed": self.seed, "training_steps": self.env_steps}
+        policy = self.trainer.full_state_policy()
+        return task_policy_file(self.task, policy, self.trainer.state.theta, **(meta | metadata))
+
+
 def _shac_fields(settings: RunSettings) -> dict:
     """The ShacConfig fields of ``settings.shac``, with the run's policy kind."""
     values = asdict(replace(settings.shac, policy=settings.policy))
@@ -209,9 +273,11 @@ def start_run(task_name: str, method: str, seed: int, settings: RunSettings) -> 
     m = registry_method(method)
     if m.estimator in SHAC_TRAINERS:
         return ShacRun(task_name, method, seed, settings)
+    if m.estimator == "ars":
+        return ArsRun(task_name, method, seed, settings)
     raise ValueError(
-        f"method must be one this module trains (estimators {SHAC_TRAINERS}); {method!r} is "
-        f"{m.estimator!r}"
+        f"method must be one this module trains (estimators {SHAC_TRAINERS + ('ars',)}); "
+        f"{method!r} is {m.estimator!r}"
     )
 
 

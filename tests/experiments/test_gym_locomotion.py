@@ -36,6 +36,7 @@ def test_outputs_and_the_shipped_policy_scores_what_the_record_says(done):
     out, summary = done
     cfg = g.Config.test_size()
     entry = summary["tasks"]["hopper"]
+    assert set(entry["methods"]) == {"shac_abs", "ars"}
     r = entry["methods"]["shac_abs"]
     assert r["seeds_done"] == [0] and r["seeds_missing"] == []
     assert r["env_steps"][0] >= cfg.env_steps
@@ -67,18 +68,19 @@ def test_a_finished_run_is_reused_and_a_changed_one_restarts(done, monkeypatch):
     assert again["tasks"] == summary["tasks"]
     changed = replace(g.Config.test_size(), env_steps=80)
     g.run(changed, out)
-    assert len(calls) == 1  # another budget: another run
+    assert len(calls) == 2  # another budget: new runs (both methods)
 
 
-def test_a_stopped_run_continues_to_the_uninterrupted_numbers(tmp_path):
+@pytest.mark.parametrize("method", ["shac_abs", "ars"])
+def test_a_stopped_run_continues_to_the_uninterrupted_numbers(tmp_path, method):
     cfg = g.Config.test_size()
-    whole = g.train_one(cfg, "hopper", "shac_abs", 0, tmp_path / "whole", None)
+    whole = g.train_one(cfg, "hopper", method, 0, tmp_path / "whole", None)
     folder = tmp_path / "parts"
     # a deadline already passed: the run stops after its first scoring, checkpointed
-    assert g.train_one(cfg, "hopper", "shac_abs", 0, folder, deadline=0.0) is None
+    assert g.train_one(cfg, "hopper", method, 0, folder, deadline=0.0) is None
     partial = json.loads((folder / "run.json").read_text())
     assert partial["status"] == "partial" and (folder / "checkpoint.pkl").exists()
-    rest = g.train_one(cfg, "hopper", "shac_abs", 0, folder, None)
+    rest = g.train_one(cfg, "hopper", method, 0, folder, None)
     assert _numbers(rest["curve"]) == _numbers(whole["curve"])
     assert rest["mujoco"]["returns"] == whole["mujoco"]["returns"]
     assert not (folder / "checkpoint.pkl").exists()  # finished: only the policy stays
