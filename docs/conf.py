@@ -33,7 +33,7 @@ try:
 
     release = _version("drake-abs")
 except Exception:  # pragma: no cover - the package is installed editable in .venv
-    release = "0.1.0"
+    release = "0.2.0"
 version = release
 
 extensions = [

@@ -3,8 +3,8 @@
 Usage::
 
     drake-abs demo [--out DIR] [--duration S] [--no-meshcat]
-    drake-abs experiment NAME [--out DIR] [--test-size] [--no-progress] [--ray] [--address ADDR]
-                         [--workers N]
+    drake-abs experiment NAME [--out DIR] [--test-size] [--set KEY=VALUE ...] [--no-progress]
+                         [--ray] [--address ADDR] [--workers N]
     drake-abs experiment --list
     drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
                     [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
@@ -154,13 +154,16 @@ def _run_demo(out: Path, *, duration: float | None, meshcat: bool) -> int:
 
 
 def _run_standard(name: str, out: Path | None, *, test_size: bool, ray: bool = False,
-                  address: str | None = None, workers: int | None = None) -> int:  # fmt: skip
-    """Run one experiment; with ``ray`` its estimators' rollouts go to a
-    :class:`~drake_abs.parallel.RayRunner` (the same numbers, see drake_abs.parallel)."""
+                  address: str | None = None, workers: int | None = None,
+                  config=None) -> int:  # fmt: skip
+    """Run one experiment (``config``, default its Config or test size); with ``ray`` its
+    estimators' rollouts go to a :class:`~drake_abs.parallel.RayRunner` (the same numbers, see
+    drake_abs.parallel)."""
     from drake_abs.experiments.outputs import default_out
 
     module = experiment_module(name)
-    config = module.Config.test_size() if test_size else module.Config()
+    if config is None:
+        config = module.Config.test_size() if test_size else module.Config()
     folder = default_out(name) if out is None else out.expanduser().resolve()
     if not ray:
         summary = module.run(config, folder)
@@ -484,6 +487,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default=None, metavar="DIR", help="results folder (default: results/NAME)"
     )
     exp.add_argument("--test-size", action="store_true", help="the reduced size CI runs")
+    exp.add_argument(
+        "--set", action="append", default=[], dest="settings", metavar="KEY=VALUE",
+        help="a setting of the experiment's Config (repeat for more; a dotted KEY such as "
+        "settings.shac.actor_lr sets a field of a group of settings)",
+    )  # fmt: skip
     exp.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_ray_options(
         exp, "run the estimators' rollouts on Ray actors (a local cluster on 127.0.0.1)"
@@ -709,8 +717,32 @@ def main(argv: list[str] | None = None) -> int:
     _check_folder(sub, args.out)
     on_ray = wants_ray(sub, args)
     out = None if args.out is None else Path(args.out)
+    config = _configured(sub, args.name, args.settings, args.test_size)
     return _run_standard(args.name, out, test_size=args.test_size, ray=on_ray,
-                         address=args.address, workers=args.workers)  # fmt: skip
+                         address=args.address, workers=args.workers, config=config)  # fmt: skip
+
+
+def _configured(sub: argparse.ArgumentParser, name: str, settings: list[str], test_size: bool):
+    """The experiment's Config (test size or full) with the ``--set KEY=VALUE`` settings
+    applied, or None without any; a usage error (exit 2) naming a bad one."""
+    if not settings:
+        return None
+    from drake_abs.experiments.sweep import GridError, parse_setting
+    from drake_abs.parallel.overrides import apply_overrides
+
+    module = experiment_module(name)
+    base = module.Config.test_size() if test_size else module.Config()
+    values = {}
+    try:
+        for setting in settings:
+            key, parsed = parse_setting(setting, base)
+            if len(parsed) != 1 or key in values:
+                raise GridError("--set", f"{setting!r}: give one value per setting, once "
+                                "(a sweep runs several: drake-abs sweep)")  # fmt: skip
+            values[key] = parsed[0]
+        return apply_overrides(base, values)
+    except (GridError, ValueError) as err:
+        sub.error(f"argument --set: {err}")
 
 
 if __name__ == "__main__":

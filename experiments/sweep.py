@@ -22,7 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from drake_abs.experiments.catalog import experiment_module
-from drake_abs.parallel.overrides import apply_overrides, coerce_field, field_names, field_spec
+from drake_abs.parallel.overrides import (
+    apply_overrides,
+    coerce_field,
+    field_names,
+    field_spec,
+    has_field,
+)
 from drake_abs.parallel.sweep import SweepResult
 from drake_abs.parallel.sweep_points import label
 
@@ -130,7 +136,7 @@ def parse_setting(setting: str, base: Any) -> tuple[str, list[Any]]:
     key = key.strip()
     if not sep or not key:
         raise GridError("--set", f"expected KEY=V1,V2,... such as samples=8,16; got {setting!r}")
-    if key not in field_names(type(base)):
+    if not has_field(base, key):
         raise GridError(
             "--set",
             f"{setting!r}: unknown setting {key!r}; the settings are: "

@@ -138,15 +138,40 @@ def check_field(cls: type, name: str) -> None:
         raise ValueError(f"unknown setting {name!r}; the settings are: {', '.join(names)}")
 
 
+def _resolve(config: Any, name: str) -> tuple[Any, str]:
+    """For a dotted name ``"a.b.c"``, the dataclass value ``config.a.b`` and ``"c"``; for a plain
+    name, ``(config, name)``. ValueError naming the part that is not a settings group."""
+    *path, last = name.split(".")
+    owner = config
+    for i, part in enumerate(path):
+        check_field(type(owner), part)
+        owner = getattr(owner, part)
+        if not dataclasses.is_dataclass(owner):
+            where = ".".join(path[: i + 1])
+            raise ValueError(f"{where!r} is not a group of settings, so {name!r} names nothing")
+    return owner, last
+
+
 def field_spec(config: Any, name: str) -> Any:
     """The :func:`expected_type` of field ``name`` of ``config``'s class (from the annotation,
     else from the field's default, else from ``config``'s value); ValueError for an unknown
-    field."""
+    field. A dotted name (``settings.shac.actor_lr``) names a field of a nested settings
+    dataclass."""
+    config, name = _resolve(config, name)
     cls = type(config)
     check_field(cls, name)
     f = next(f for f in dataclasses.fields(cls) if f.name == name)
     default = f.default if f.default is not dataclasses.MISSING else getattr(config, name)
     return expected_type(cls, name, default)
+
+
+def has_field(config: Any, name: str) -> bool:
+    """Whether ``name`` (plain or dotted) names a field of ``config``."""
+    try:
+        owner, last = _resolve(config, name)
+    except ValueError:
+        return False
+    return last in field_names(type(owner))
 
 
 def coerce_field(config: Any, name: str, value: Any) -> Any:
@@ -155,6 +180,18 @@ def coerce_field(config: Any, name: str, value: Any) -> Any:
 
 
 def apply_overrides(config: Any, values: Mapping[str, Any]) -> Any:
-    """``dataclasses.replace(config, **values)`` with every value checked and converted."""
-    changes = {name: coerce_field(config, name, v) for name, v in values.items()}
+    """``dataclasses.replace(config, **values)`` with every value checked and converted; a dotted
+    name (``settings.shac.actor_lr``) replaces a field of a nested settings dataclass."""
+    plain = {name: v for name, v in values.items() if "." not in name}
+    changes = {name: coerce_field(config, name, v) for name, v in plain.items()}
+    nested: dict[str, dict[str, Any]] = {}
+    for name, v in values.items():
+        if "." in name:
+            head, rest = name.split(".", 1)
+            _resolve(config, name)  # names the bad part now
+            nested.setdefault(head, {})[rest] = v
+    for head, inner in nested.items():
+        if head in changes:
+            raise ValueError(f"{head!r} is set both whole and by its fields; set one or the other")
+        changes[head] = apply_overrides(getattr(config, head), inner)
     return dataclasses.replace(config, **changes)
