@@ -121,10 +121,13 @@ def _version() -> str:
 
 
 def run_identity(config: Config, task: str, method: str, seed: int) -> dict:
-    """What defines one run's numbers (its ``run.json`` must match to be reused)."""
+    """What defines one run's numbers (its ``run.json`` must match to be reused): the task,
+    method, seed, budget, scoring, drake-abs version and the settings its trainer reads
+    (:meth:`~drake_abs.tasks.training_runs.RunSettings.for_method`)."""
+    settings = config.settings.for_method(method)
     return {
         "task": task, "method": method, "seed": int(seed), "env_steps": int(config.env_steps),
-        "settings": outputs_jsonable(asdict(config.settings)),
+        "settings": outputs_jsonable(settings),
         "evaluations": int(config.evaluations), "score_seeds": int(config.score_seeds),
         "episode_steps": int(config.episode_steps), "plant_score": bool(config.plant_score),
         "drake_abs_version": _version(),

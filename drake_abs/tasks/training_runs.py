@@ -128,6 +128,17 @@ class RunSettings:
                 f"{self.contact_aware!r}, {self.survive_width!r}"
             )
 
+    def for_method(self, method: str) -> dict:
+        """The settings a run of ``method`` reads, as a dict (what defines its numbers beside the
+        task, method and seed): ARS reads ``ars`` and the control period; the SHAC trainer
+        everything else."""
+        m = registry_method(method)
+        values = asdict(self)
+        plant = {"control_period": self.control_period, "substeps": self.substeps}
+        if m.estimator == "ars":
+            return plant | {"ars": values["ars"]}
+        return {key: v for key, v in values.items() if key != "ars"}
+
 
 def training_task(task_name: str, method: str, settings: RunSettings) -> LocomotionTask:
     """The task a method trains on: the method's smoothing of the plant, and the smooth

@@ -91,3 +91,13 @@ def test_bad_settings_are_named():
         replace(g.Config.test_size(), tasks=("humanoid",)).check()
     with pytest.raises(ValueError, match="evaluations must be >= 2"):
         replace(g.Config.test_size(), evaluations=1).check()
+
+
+def test_a_run_is_defined_by_the_settings_its_trainer_reads():
+    cfg = g.Config.test_size()
+    other = replace(cfg, settings=replace(cfg.settings, shac=replace(cfg.settings.shac, sigma=0.3)))
+    assert g.run_identity(cfg, "hopper", "ars", 0) == g.run_identity(other, "hopper", "ars", 0)
+    assert g.run_identity(cfg, "hopper", "shac_abs", 0) != g.run_identity(
+        other, "hopper", "shac_abs", 0
+    )
+    assert g.run_identity(cfg, "hopper", "ars", 0) != g.run_identity(cfg, "hopper", "ars", 1)
