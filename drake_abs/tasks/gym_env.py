@@ -13,6 +13,9 @@ Episodes are truncated after ``max_episode_steps`` steps (default 1000, gymnasiu
 scene's time step (``dt``; see :mod:`drake_abs.tasks.locomotion` on how it differs from
 gymnasium's).
 
+:func:`step_task` is that step for a batch of B environments in one call of the stepper (what
+:class:`DrakeAbsEnv` runs with B = 1, and :mod:`drake_abs.tasks.sb3_vec_env` with B = n_envs).
+
 :func:`register_envs` registers ``drake_abs/Hopper-v0`` and ``drake_abs/HalfCheetah-v0`` for
 ``gymnasium.make``.
 
@@ -20,6 +23,8 @@ Needs gymnasium (``pip install 'drake-abs[dev]'``); the rest of :mod:`drake_abs.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,7 +40,7 @@ except ImportError as err:  # pragma: no cover - gymnasium is in the dev extra
 from drake_abs._validation import as_count
 from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
 
-__all__ = ["ENV_IDS", "DrakeAbsEnv", "register_envs"]
+__all__ = ["ENV_IDS", "DrakeAbsEnv", "TaskSteps", "register_envs", "step_task"]
 
 #: gymnasium ids registered by :func:`register_envs` -> task name.
 ENV_IDS = {
@@ -132,26 +137,78 @@ class DrakeAbsEnv(gymnasium.Env):
         a = np.asarray(action, dtype=float)
         if a.shape != (self.task.nu,):
             raise ValueError(f"action must have shape (nu,) = ({self.task.nu},); got {a.shape}")
-        x, u = self._x[None], a[None]
-        step = self.task.stepper.step(x, u, jacobians=False)
-        x_next = np.asarray(step.x_next, dtype=float).reshape(1, -1)
-        if not np.all(np.isfinite(x_next)):
-            raise FloatingPointError(
-                f"DrakeAbsEnv.step: the next state is not finite (state {self._x}, action {a})"
-            )
-        reward = self.task.reward
-        extra = {"step": step} if getattr(reward, "uses_step", False) else {}
-        if hasattr(reward, "transition"):
-            r = reward.transition(x, u, x_next, **extra)[0]
-        else:
-            r = reward.stage(x, u)[0]
-        terminated = bool(reward.terminated(x_next)[0]) if hasattr(reward, "terminated") else False
-        info = self._info("info", x, u, x_next, *([step] if extra else []))
-        info["converged"] = bool(np.asarray(step.converged).ravel()[0])
-        self._x = x_next[0]
+        steps = step_task(self.task, self._x[None], a[None])
+        info = {k: float(v[0]) for k, v in steps.info.items()}
+        info["converged"] = bool(steps.converged[0])
+        self._x = steps.x_next[0]
         self._steps += 1
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        return self._obs(), float(r[0]), terminated, truncated, info
+        return self._obs(), float(steps.reward[0]), bool(steps.terminated[0]), truncated, info
+
+
+@dataclass(frozen=True)
+class TaskSteps:
+    """One environment step of B copies of a task (:func:`step_task`).
+
+    Attributes:
+        x_next: (B, nx) the states after the step.
+        reward: (B,) the task's reward of each transition.
+        terminated: (B,) bool, the task's termination at x_next (all False without one).
+        converged: (B,) bool, whether the contact solve converged (a False row's x_next is the
+            solver's last iterate: not exact, but finite).
+        info: gymnasium's ``info`` entries of the task (``task.info``), each (B,).
+    """
+
+    x_next: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    converged: np.ndarray
+    info: dict[str, np.ndarray]
+
+
+def step_task(task, x, u) -> TaskSteps:
+    """Step B environments of ``task`` (as :class:`DrakeAbsEnv` takes it) in one call of its
+    stepper and score each transition with the task's own reward, termination and info.
+
+    Args:
+        task: a task (see :class:`DrakeAbsEnv`).
+        x: (B, nx) states.
+        u: (B, nu) actions in [-1, 1].
+
+    Raises:
+        ValueError: x or u of the wrong shape.
+        FloatingPointError: a next state is not finite (the rows, states and actions named).
+    """
+    x = np.asarray(x, dtype=float)
+    u = np.asarray(u, dtype=float)
+    nx, nu = task.x0.size, task.nu
+    if x.ndim != 2 or x.shape[1] != nx or u.shape != (x.shape[0], nu):
+        raise ValueError(
+            f"x and u must have shapes (B, nx) = (B, {nx}) and (B, nu) = (B, {nu}); got "
+            f"{x.shape} and {u.shape}"
+        )
+    step = task.stepper.step(x, u, jacobians=False)
+    x_next = np.asarray(step.x_next, dtype=float).reshape(x.shape)
+    bad = np.flatnonzero(~np.all(np.isfinite(x_next), axis=1))
+    if bad.size:
+        raise FloatingPointError(
+            f"step_task: the next state of row(s) {bad.tolist()} is not finite (states "
+            f"{x[bad].tolist()}, actions {u[bad].tolist()})"
+        )
+    reward = task.reward
+    extra = {"step": step} if getattr(reward, "uses_step", False) else {}
+    if hasattr(reward, "transition"):
+        r = reward.transition(x, u, x_next, **extra)[0]
+    else:
+        r = reward.stage(x, u)[0]
+    if hasattr(reward, "terminated"):
+        terminated = np.asarray(reward.terminated(x_next), dtype=bool).reshape(x.shape[0])
+    else:
+        terminated = np.zeros(x.shape[0], dtype=bool)
+    make = getattr(task, "info", None)
+    info = {} if make is None else dict(make(x, u, x_next, *([step] if extra else [])))
+    converged = np.asarray(step.converged, dtype=bool).reshape(x.shape[0])
+    return TaskSteps(x_next, np.asarray(r, dtype=float), terminated, converged, info)
 
 
 def register_envs() -> None:

@@ -10,6 +10,14 @@ action per control period (gymnasium's, 8 ms Hopper, 50 ms HalfCheetah), episode
 after 1000 actions. One **environment step** is one control period stepped (one ``env.step``),
 as our own trainers count: the step that ends an episode counts, a reset does not.
 
+**Several environments at once** (``n_envs`` > 1, PPO and SAC): ``n_envs`` copies of the task
+in one :class:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv`, stepped in one batched call of our
+plant (the same transitions as ``n_envs`` independent ``DrakeAbsEnv``, bit for bit, at a
+fraction of the cost per step), with the hyperparameters adapted so that each update sees the
+same amount of data (:func:`vectorised_hyperparameters`: PPO's rollout keeps its 512 steps,
+``n_steps = 512 / n_envs``; SAC keeps one gradient step per transition). Every environment's
+step counts. sb3-contrib's ARS stays on one environment (it evaluates one candidate at a time).
+
 Hyperparameters (:data:`ZOO_SETTINGS`): the RL Baselines3 Zoo's (github.com/DLR-RM/
 rl-baselines3-zoo, ``hyperparams/*.yml``) for the MuJoCo task of the same body:
 
@@ -28,11 +36,13 @@ MuJoCo v3/v4; the budget is ``env_steps`` (not the zoo's ``n_timesteps``); ``Vec
 ``clip_obs`` is infinite (the zoo's default is 10) because the policy file has no clip of the
 normalised observation: with it the exported policy is exactly the trained one (a finite
 ``clip_obs`` can be asked for, and then :func:`sb3_policy_file` refuses to export); one
-environment, on the CPU, torch with one thread. ``algorithm_options`` override any setting.
+environment unless ``n_envs`` says more, on the CPU, torch with one thread.
+``algorithm_options`` override any setting.
 
 The budget is each library's ``learn(total_timesteps=env_steps)``, which never wastes a step:
-SAC stops after exactly ``env_steps`` environment steps; PPO after the whole rollout in which it
-reaches them (a multiple of ``n_steps``, 512 in the zoo: at most 511 steps over); ARS after the
+SAC stops after exactly ``env_steps`` environment steps (with ``n_envs``: the first multiple of
+``n_envs`` at or past them); PPO after the whole rollout in which it reaches them (a multiple of
+``n_steps * n_envs``, 512 in the zoo: at most 511 steps over); ARS after the
 whole iteration in which it reaches them (an iteration is 2 ``n_delta`` episodes: at most
 2 ``n_delta`` x 1000 steps over, e.g. 64000 for the HalfCheetah's 32 directions). The steps
 actually taken are counted and returned. Our own trainers also round to whole iterations.
@@ -40,8 +50,9 @@ actually taken are counted and returned. Our own trainers also round to whole it
 iteration in progress is then counted but not used.
 
 Seeds: ``seed`` seeds the library (python, numpy, torch, the action space) and the
-environment's first reset (later resets continue its generator). With torch on one thread
-the runs are bit-reproducible: the same seed gives the same policy to the last bit
+environment's first reset (later resets continue its generator); with ``n_envs``, environment
+m's first reset is seeded with ``seed + m`` (stable-baselines3's convention). With torch on
+one thread the runs are bit-reproducible: the same seed gives the same policy to the last bit
 (``tests/tasks/test_sb3_baselines.py``).
 
 Exported policies (:func:`sb3_policy_file`): PPO's deterministic action is its actor's MLP
@@ -57,7 +68,7 @@ imported when a function here is called, and gymnasium.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Literal
@@ -76,10 +87,12 @@ __all__ = [
     "ZOO_SETTINGS",
     "BaselineRun",
     "StepLog",
+    "TrainingLog",
     "ZooSettings",
     "baseline_settings",
     "sb3_policy_file",
     "train_baseline",
+    "vectorised_hyperparameters",
 ]
 
 #: The algorithms :func:`train_baseline` runs.
@@ -183,13 +196,20 @@ def _check_names(task_name: str, algorithm: str) -> None:
 
 
 def baseline_settings(
-    task_name: str, algorithm: Literal["ppo", "sac", "ars"], algorithm_options=None
+    task_name: str,
+    algorithm: Literal["ppo", "sac", "ars"],
+    algorithm_options=None,
+    n_envs: int = 1,
 ) -> dict:
     """The settings :func:`train_baseline` uses: ``{"source", "hyperparameters",
     "normalize"}`` (plain data), the zoo's (:data:`ZOO_SETTINGS`) with ``algorithm_options``
     laid over the hyperparameters (its key ``"normalize"``: ``VecNormalize`` keyword arguments
-    laid over the zoo's, or False for none; ``"policy_kwargs"`` replaces the zoo's whole)."""
+    laid over the zoo's, or False for none; ``"policy_kwargs"`` replaces the zoo's whole).
+
+    These are settings for one environment. With ``n_envs`` > 1 the hyperparameters are
+    adapted to ``n_envs`` environments stepped together (:func:`vectorised_hyperparameters`)."""
     _check_names(task_name, algorithm)
+    n_envs = as_count(n_envs, "n_envs", minimum=1)
     options = dict(algorithm_options or {})
     zoo = ZOO_SETTINGS[algorithm][task_name]
     normalize = options.pop("normalize", None)
@@ -205,31 +225,110 @@ def baseline_settings(
             f"False; got {normalize!r}"
         )
     hyper = {**zoo.hyperparameters, **options}
+    if n_envs > 1:
+        hyper = vectorised_hyperparameters(algorithm, hyper, n_envs)
     return {"source": zoo.source, "hyperparameters": hyper, "normalize": norm}
 
 
-# ------------------------------------------------------------------------------ the env wrapper
+def _library_default(algorithm: str, name: str):
+    """The default of a constructor argument of the library's algorithm class."""
+    import inspect
+
+    return inspect.signature(_algorithm_class(algorithm)).parameters[name].default
 
 
-class StepLog(gymnasium.Wrapper):
-    """Counts a ``gymnasium.Env``'s steps and records its training episodes and the rows of the
-    training log (wrap the raw environment, inside any normalisation: returns are the task's).
+def vectorised_hyperparameters(
+    algorithm: Literal["ppo", "sac", "ars"], hyperparameters: Mapping, n_envs: int
+) -> dict:
+    """One environment's hyperparameters adapted to ``n_envs`` environments stepped together,
+    the usual way, so that the data per update stays the same:
 
-    Every ``log_every`` steps (and at :meth:`close_log`) a row: ``env_steps``, ``seconds``
-    (wall time since :meth:`start_clock`), ``episodes`` (training episodes that ended since the
-    previous row), ``return_mean`` and ``length_mean`` over those (None when none ended),
-    ``unconverged`` (steps so far whose contact solve did not converge; ``info["converged"]``).
+    - PPO: ``n_steps`` (steps per environment per rollout) becomes ``n_steps / n_envs``: the
+      rollout keeps its size ``n_steps * n_envs`` (the zoo's 512), and ``batch_size`` and
+      ``n_epochs`` are unchanged. ``n_steps`` must be a multiple of ``n_envs``.
+    - SAC: ``train_freq`` counts steps of all environments at once (each brings ``n_envs``
+      transitions), so ``gradient_steps`` becomes ``gradient_steps * n_envs`` (-1 stays -1: it
+      already means one per transition): the same gradient steps per transition as with one
+      environment (the zoo's one per transition, then ``n_envs`` after each batched step).
+      ``learning_starts`` and ``batch_size`` count transitions and are unchanged. An episodic
+      ``train_freq`` is refused (stable-baselines3 allows it with one environment only).
+    - ARS: refused. sb3-contrib's ARS evaluates each candidate policy in its own episodes on
+      ``model.env`` one candidate after another (``evaluate_policy``, ``n_eval_episodes``
+      episodes each); with ``n_envs`` environments the other environments step along and
+      their steps are spent but not used (with ``n_eval_episodes = 1`` only the last
+      environment's episode counts). Its ``async_eval`` runs candidates in worker processes
+      (one environment each), not in one batch.
+
+    The library's own default is taken for a missing key (needs the library then).
+
+    Raises:
+        ValueError: ARS, an ``n_steps`` that ``n_envs`` does not divide, an episodic
+            ``train_freq``.
+    """
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm must be one of {list(ALGORITHMS)}; got {algorithm!r}")
+    n_envs = as_count(n_envs, "n_envs", minimum=1)
+    hyper = dict(hyperparameters)
+    if n_envs == 1:
+        return hyper
+    if algorithm == "ars":
+        raise ValueError(
+            f"n_envs must be 1 for ARS (got {n_envs}): sb3-contrib's ARS evaluates one candidate "
+            "policy at a time on its environment, so more environments would step without use"
+        )
+    if algorithm == "ppo":
+        n_steps = hyper["n_steps"] if "n_steps" in hyper else _library_default("ppo", "n_steps")
+        if n_steps % n_envs:
+            raise ValueError(
+                f"n_envs must divide PPO's n_steps = {n_steps} (the rollout of one environment, "
+                f"kept as n_steps / n_envs per environment); got n_envs = {n_envs}"
+            )
+        hyper["n_steps"] = n_steps // n_envs
+        return hyper
+
+    def value(name):
+        return hyper[name] if name in hyper else _library_default("sac", name)
+
+    train_freq = value("train_freq")
+    if not isinstance(train_freq, int | np.integer) and not (
+        isinstance(train_freq, tuple) and len(train_freq) == 2 and train_freq[1] == "step"
+    ):
+        raise ValueError(
+            f"SAC's train_freq must count steps (an integer or (n, 'step')) with n_envs > 1; "
+            f"got {train_freq!r}"
+        )
+    gradient_steps = value("gradient_steps")
+    hyper["gradient_steps"] = gradient_steps if gradient_steps < 0 else gradient_steps * n_envs
+    return hyper
+
+
+# ------------------------------------------------------------------------------ the training log
+
+
+class TrainingLog:
+    """Counts the environment steps of a training run and records its episodes and the rows of
+    its log, from the steps of ``n_envs`` environments (fed the task's own rewards: inside any
+    normalisation).
+
+    Whenever the step count reaches or passes a multiple of ``log_every`` (every ``log_every``
+    steps with one environment; ``n_envs`` steps are counted at a time) and at
+    :meth:`close_log`, a row: ``env_steps``, ``seconds`` (wall time since
+    :meth:`start_clock`), ``episodes`` (training episodes that ended since the previous row,
+    in the order they ended, environment by environment within a step), ``return_mean`` and
+    ``length_mean`` over those (None when none ended), ``unconverged`` (steps so far whose
+    contact solve did not converge; ``info["converged"]``).
     """
 
-    def __init__(self, env: gymnasium.Env, log_every: int):
-        super().__init__(env)
+    def __init__(self, log_every: int, n_envs: int = 1):
         self.log_every = as_count(log_every, "log_every", minimum=1)
+        self.n_envs = as_count(n_envs, "n_envs", minimum=1)
         self.steps = 0
         self.unconverged = 0
         self.returns: list[float] = []
         self.lengths: list[int] = []
         self.rows: list[dict] = []
-        self._episode = (0.0, 0)
+        self._return = np.zeros(self.n_envs)  # of the episodes in progress
+        self._length = np.zeros(self.n_envs, dtype=int)
         self._since = 0  # episodes ended before the last row
         self._start = time.perf_counter()
 
@@ -242,23 +341,32 @@ class StepLog(gymnasium.Wrapper):
         """Wall time since :meth:`start_clock` (s)."""
         return time.perf_counter() - self._start
 
-    def reset(self, **kwargs):
-        self._episode = (0.0, 0)
-        return self.env.reset(**kwargs)
+    def new_episodes(self) -> None:
+        """Every environment starts a new episode (a reset): the ones in progress are dropped."""
+        self._return[:] = 0.0
+        self._length[:] = 0
 
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        self.steps += 1
-        self.unconverged += not info.get("converged", True)
-        total, length = self._episode
-        self._episode = (total + float(reward), length + 1)
-        if terminated or truncated:
-            self.returns.append(self._episode[0])
-            self.lengths.append(self._episode[1])
-            self._episode = (0.0, 0)
-        if self.steps % self.log_every == 0:
+    def record(self, rewards, dones, infos: Sequence[Mapping]) -> None:
+        """One step of every environment: rewards (n_envs,), dones (n_envs,) (terminated or
+        truncated), their ``info`` dicts."""
+        rewards = np.asarray(rewards, dtype=float).reshape(-1)
+        dones = np.asarray(dones, dtype=bool).reshape(-1)
+        if not rewards.size == dones.size == len(infos) == self.n_envs:
+            raise ValueError(
+                f"rewards, dones and infos must have n_envs = {self.n_envs} entries; got "
+                f"{rewards.size}, {dones.size}, {len(infos)}"
+            )
+        before = self.steps
+        self.steps += self.n_envs
+        self.unconverged += sum(not info.get("converged", True) for info in infos)
+        self._return += rewards
+        self._length += 1
+        for m in np.flatnonzero(dones):
+            self.returns.append(float(self._return[m]))
+            self.lengths.append(int(self._length[m]))
+            self._return[m], self._length[m] = 0.0, 0
+        if self.steps // self.log_every > before // self.log_every:
             self._row()
-        return obs, reward, terminated, truncated, info
 
     def _row(self) -> None:
         recent = slice(self._since, len(self.returns))
@@ -279,6 +387,46 @@ class StepLog(gymnasium.Wrapper):
             self._row()
 
 
+class StepLog(gymnasium.Wrapper):
+    """A ``gymnasium.Env`` whose steps are recorded in a :class:`TrainingLog` (of one
+    environment; wrap the raw environment, inside any normalisation: returns are the task's)."""
+
+    def __init__(self, env: gymnasium.Env, log: TrainingLog):
+        super().__init__(env)
+        if not isinstance(log, TrainingLog) or log.n_envs != 1:
+            raise ValueError(f"log must be a TrainingLog of n_envs = 1; got {log!r}")
+        self.log = log
+
+    def reset(self, **kwargs):
+        self.log.new_episodes()
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.log.record([reward], [terminated or truncated], [info])
+        return obs, reward, terminated, truncated, info
+
+
+def _vec_step_log(venv, log: TrainingLog):
+    """``venv`` (a stable-baselines3 ``VecEnv`` of ``log.n_envs`` environments) with every
+    step recorded in ``log`` (wrap the raw environments, inside any normalisation)."""
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    class VecStepLog(VecEnvWrapper):
+        def reset(self):
+            log.new_episodes()
+            return self.venv.reset()
+
+        def step_wait(self):
+            obs, rewards, dones, infos = self.venv.step_wait()
+            log.record(rewards, dones, infos)
+            return obs, rewards, dones, infos
+
+    if venv.num_envs != log.n_envs:
+        raise ValueError(f"venv has {venv.num_envs} environments, log {log.n_envs}")
+    return VecStepLog(venv)
+
+
 # ---------------------------------------------------------------------------------- training
 
 
@@ -291,12 +439,14 @@ class BaselineRun:
         env_id: the gymnasium id the task reproduces (``"Hopper-v5"``).
         env_steps: environment steps taken (control periods stepped).
         seconds: wall time of the training (s), without building the task.
-        rows: the training log (:class:`StepLog`).
+        rows: the training log (:class:`TrainingLog`).
         unconverged: steps whose contact solve did not converge.
-        settings: :func:`baseline_settings` of the run.
+        settings: :func:`baseline_settings` of the run (its hyperparameters adapted to
+            ``n_envs``).
         model: the trained stable-baselines3 / sb3-contrib model.
         vec_normalize: its ``VecNormalize`` (None without normalisation).
         stopped_early: ``max_seconds`` ran out before the budget was spent.
+        n_envs: environments stepped together.
     """
 
     task_name: str
@@ -311,13 +461,17 @@ class BaselineRun:
     model: Any = field(repr=False)
     vec_normalize: Any = field(repr=False, default=None)
     stopped_early: bool = False
+    n_envs: int = 1
 
     def policy_file(self, **metadata) -> PolicyFile:
         """The final policy as a policy file (:func:`sb3_policy_file`), with metadata
-        ``env_id``, ``method`` (:data:`METHOD_KEYS`), ``seed``, ``training_steps`` and the
-        package versions; ``metadata`` adds or replaces keys."""
+        ``env_id``, ``method`` (:data:`METHOD_KEYS`), ``seed``, ``training_steps``, the
+        package versions and, with ``n_envs`` > 1, ``n_envs``; ``metadata`` adds or replaces
+        keys."""
         meta = {"env_id": self.env_id, "method": METHOD_KEYS[self.algorithm],
                 "seed": self.seed, "training_steps": self.env_steps}  # fmt: skip
+        if self.n_envs > 1:
+            meta["n_envs"] = self.n_envs
         meta = {k: v for k, v in meta.items() if v is not None}
         return sb3_policy_file(self.model, self.vec_normalize, **(meta | metadata))
 
@@ -364,6 +518,7 @@ def train_baseline(
     log_every: int = 10_000,
     max_episode_steps: int = 1000,
     max_seconds: float | None = None,
+    n_envs: int = 1,
 ) -> BaselineRun:
     """Train ``algorithm`` (stable-baselines3's PPO or SAC, sb3-contrib's ARS) on the task
     ``task_name`` on our plant for ``env_steps`` environment steps (module docstring).
@@ -382,6 +537,11 @@ def train_baseline(
         max_episode_steps: steps after which an episode is truncated (gymnasium's 1000).
         max_seconds: stop after this much wall time (s) if the budget is not spent by then
             (``stopped_early`` in the result); None: no limit.
+        n_envs: environments stepped together. 1 (default): one
+            :class:`~drake_abs.tasks.gym_env.DrakeAbsEnv` in a ``DummyVecEnv``. More: one
+            :class:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv` (one batched step of our
+            plant for all of them), the hyperparameters adapted
+            (:func:`vectorised_hyperparameters`; PPO and SAC only).
 
     Returns:
         A :class:`BaselineRun`; ``.policy_file()`` is the final policy as a policy file.
@@ -402,14 +562,22 @@ def train_baseline(
         isinstance(max_seconds, int | float) and np.isfinite(max_seconds) and max_seconds > 0
     ):
         raise ValueError(f"max_seconds must be a number > 0 (s) or None; got {max_seconds!r}")
-    settings = baseline_settings(task_name, algorithm, algorithm_options)
+    n_envs = as_count(n_envs, "n_envs", minimum=1)
+    settings = baseline_settings(task_name, algorithm, algorithm_options, n_envs)
+    log = TrainingLog(log_every, n_envs)
 
     import torch
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     task = locomotion_task(task_name, **dict(env_options or {}))
-    log = StepLog(DrakeAbsEnv(task, max_episode_steps=max_episode_steps), log_every)
-    venv = DummyVecEnv([lambda: log])
+    if n_envs == 1:
+        env = StepLog(DrakeAbsEnv(task, max_episode_steps=max_episode_steps), log)
+        venv = DummyVecEnv([lambda: env])
+    else:
+        from drake_abs.tasks.sb3_vec_env import DrakeAbsVecEnv
+
+        venv = _vec_step_log(DrakeAbsVecEnv(task, n_envs, max_episode_steps=max_episode_steps),
+                             log)  # fmt: skip
     vec_normalize = None
     if settings["normalize"] is not None:
         kwargs = dict(settings["normalize"])
@@ -456,7 +624,7 @@ def train_baseline(
         task_name=task_name, algorithm=algorithm, seed=seed, env_id=task.env_id,
         env_steps=log.steps, seconds=seconds, rows=log.rows, unconverged=log.unconverged,
         settings=settings, model=model, vec_normalize=vec_normalize,
-        stopped_early=bool(stopped),
+        stopped_early=bool(stopped), n_envs=n_envs,
     )  # fmt: skip
 
 

@@ -23,9 +23,11 @@ pytest.importorskip("gymnasium")
 
 from drake_abs.tasks.sb3_baselines import (  # noqa: E402
     ZOO_SETTINGS,
+    TrainingLog,
     baseline_settings,
     sb3_policy_file,
     train_baseline,
+    vectorised_hyperparameters,
 )
 
 #: Tiny runs: a PPO rollout of 64 steps, SAC's first 100 steps random, two ARS directions.
@@ -252,3 +254,70 @@ def test_other_actor_architectures_export_exactly(rng):
         predicted, _ = model.predict(obs.astype(np.float32), deterministic=True)
         np.testing.assert_allclose(file.act(obs.astype(np.float32)), predicted, rtol=0,
                                    atol=1e-6)  # fmt: skip
+
+
+# ------------------------------------------------------------------ several environments at once
+
+
+def test_the_hyperparameters_keep_the_data_per_update_with_n_envs():
+    ppo = baseline_settings("hopper", "ppo", n_envs=8)["hyperparameters"]
+    assert (ppo["n_steps"], ppo["batch_size"], ppo["n_epochs"]) == (64, 32, 5)  # 8 x 64 = 512
+    assert baseline_settings("hopper", "ppo", n_envs=1) == baseline_settings("hopper", "ppo")
+    sac = baseline_settings("half_cheetah", "sac", n_envs=16)["hyperparameters"]
+    assert sac == {"learning_starts": 10000, "gradient_steps": 16}
+    assert vectorised_hyperparameters("sac", {"gradient_steps": -1}, 4) == {"gradient_steps": -1}
+    assert vectorised_hyperparameters("sac", {"train_freq": 4, "gradient_steps": 2}, 4) == {
+        "train_freq": 4, "gradient_steps": 8}  # fmt: skip
+    with pytest.raises(ValueError, match="n_envs must divide PPO's n_steps = 512"):
+        baseline_settings("hopper", "ppo", n_envs=3)
+    with pytest.raises(ValueError, match="n_envs must be 1 for ARS"):
+        baseline_settings("hopper", "ars", n_envs=2)
+    with pytest.raises(ValueError, match="train_freq must count steps"):
+        vectorised_hyperparameters("sac", {"train_freq": (1, "episode")}, 2)
+    with pytest.raises(ValueError, match="n_envs must be"):
+        train_baseline("hopper", "ppo", 0, 10, n_envs=0)
+    with pytest.raises(ValueError, match="n_envs must be 1 for ARS"):
+        train_baseline("hopper", "ars", 0, 10, n_envs=2)
+    _libraries()  # the library's defaults where the zoo has none (Ant: PPO's own n_steps 2048)
+    assert baseline_settings("ant", "ppo", n_envs=16)["hyperparameters"] == {"n_steps": 128}
+
+
+def test_the_log_counts_every_environment():
+    log = TrainingLog(log_every=5, n_envs=3)
+    info = [{"converged": True}, {"converged": False}, {}]
+    log.record([1.0, 2.0, 3.0], [False, True, False], info)  # env 1 ends (return 2, length 1)
+    log.record([1.0, 1.0, 1.0], [True, False, True], info)  # 6 steps: a row
+    assert (log.steps, log.unconverged, log.returns, log.lengths) == (6, 2, [2.0, 2.0, 4.0],
+                                                                      [1, 2, 2])  # fmt: skip
+    assert [(r["env_steps"], r["episodes"], r["return_mean"]) for r in log.rows] == [
+        (6, 3, 8.0 / 3)]  # fmt: skip
+    log.record([0.5] * 3, [False] * 3, info)  # 9: no row
+    log.record([0.5] * 3, [False] * 3, info)  # 12 passes 10: a row, no episode
+    assert [(r["env_steps"], r["episodes"], r["length_mean"]) for r in log.rows][1:] == [
+        (12, 0, None)]  # fmt: skip
+    with pytest.raises(ValueError, match="must have n_envs = 3 entries"):
+        log.record([1.0], [False], info[:1])
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_a_tiny_run_on_several_environments(algo):
+    """PPO: rollouts of 2 x 32 = 64 steps (the same 64 as one environment's TINY rollout); SAC:
+    2 gradient steps after each step of the two environments."""
+    _libraries()
+    run = train_baseline("hopper", algo, 3, BUDGET, algorithm_options=TINY[algo],
+                         log_every=LOG_EVERY, n_envs=2)  # fmt: skip
+    assert run.n_envs == 2 and run.model.n_envs == 2
+    assert run.settings == baseline_settings("hopper", algo, TINY[algo], n_envs=2)
+    if algo == "ppo":
+        assert run.model.n_steps == 32 and run.env_steps == -(-BUDGET // 64) * 64
+    else:
+        assert run.model.gradient_steps == 2 and run.env_steps == BUDGET
+    assert run.model.num_timesteps == run.env_steps
+    steps = [row["env_steps"] for row in run.rows]
+    assert steps[: BUDGET // LOG_EVERY] == list(range(LOG_EVERY, BUDGET + 1, LOG_EVERY))
+    assert steps[-1] == run.env_steps and sum(row["episodes"] for row in run.rows) >= 2
+    assert run.policy_file().metadata["n_envs"] == 2
+    again = train_baseline("hopper", algo, 3, BUDGET, algorithm_options=TINY[algo],
+                           log_every=LOG_EVERY, n_envs=2)  # fmt: skip
+    for key, value in run.policy_file().arrays().items():
+        np.testing.assert_array_equal(value, again.policy_file().arrays()[key], err_msg=key)
