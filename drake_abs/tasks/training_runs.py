@@ -11,7 +11,8 @@ A run (:class:`TrainingRun`) has
 - ``iterate()``: one iteration, returning its log row (``rows``: all of them);
 - ``recent_return``: the mean return (gymnasium's reward) of the episodes completed lately;
 - ``task``: the task it trains on;
-- ``save(path)``: the whole training state, so that :func:`resume_run` continues it;
+- ``save(path)``: the whole training state; ``load(path)`` continues from it (what
+  :func:`resume_run` does);
 - ``policy_file(**metadata)``: the current policy as a
   :class:`~drake_abs.policy.policy_files.PolicyFile` of gymnasium's observation.
 
@@ -84,6 +85,8 @@ class TrainingRun(Protocol):
     def iterate(self) -> dict: ...
 
     def save(self, path: str | Path) -> None: ...
+
+    def load(self, path: str | Path) -> TrainingRun: ...
 
     def policy_file(self, **metadata) -> PolicyFile: ...
 
