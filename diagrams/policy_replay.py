@@ -11,7 +11,7 @@ page, played offline in a browser; Meshcat binds to localhost only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from pydrake.geometry import Meshcat
@@ -22,7 +22,7 @@ from drake_abs.policy.saving import SavedPolicy
 from drake_abs.tasks.locomotion import TASKS
 from drake_abs.tasks.saved_policies import Episode, load_policy, reset_state, run_episode
 
-__all__ = ["DEFAULT_STEPS", "PolicyReplay", "replay_policy_html"]
+__all__ = ["DEFAULT_STEPS", "PolicyReplay", "replay_policy_html", "replay_scene"]
 
 #: The steps replayed when none are given (gymnasium's episode length).
 DEFAULT_STEPS = 1000
@@ -40,13 +40,19 @@ class PolicyReplay:
     seed: int
 
 
-def _scene(task) -> Scene:
-    scene = getattr(getattr(task.stepper, "stepper", None), "scene", None)
-    if isinstance(scene, Scene):
-        return scene
-    if task.name in TASKS:
-        return Scene.load(TASKS[task.name].scene)
-    raise ValueError(f"task {task.name!r} has no scene to draw (its stepper has no 'scene')")
+def replay_scene(task) -> Scene:
+    """The task's scene with one frame per action: its ``time_step`` set to the task's control
+    period ``task.dt`` (the states recorded are one per action, each ``substeps`` plant
+    steps)."""
+    plant = getattr(task, "plant", None) or getattr(task.stepper, "stepper", None)
+    scene = getattr(plant, "scene", None)
+    if not isinstance(scene, Scene):
+        if task.name not in TASKS:
+            raise ValueError(
+                f"task {task.name!r} has no scene to draw (its stepper has no 'scene')"
+            )
+        scene = Scene.load(TASKS[task.name].scene)
+    return replace(scene, time_step=float(task.dt))
 
 
 def replay_policy_html(
@@ -65,8 +71,9 @@ def replay_policy_html(
             :func:`drake_abs.tasks.saved_policies.load_policy` returns), or the saved policy's
             ``STEM.json`` / ``STEM.npz`` / ``STEM`` (loaded with that function).
         html_path: the HTML file to write (its folder is created).
-        steps: the most time steps to run (one every ``task.dt`` s, 0.01 s for gymnasium's
-            scenes); default :data:`DEFAULT_STEPS` (gymnasium's episode length).
+        steps: the most actions to run (one every ``task.dt`` s, gymnasium's control period for
+            its tasks: 8 ms Hopper, 50 ms HalfCheetah); default :data:`DEFAULT_STEPS`
+            (gymnasium's episode length).
         seed: the reset seed (gymnasium's ``reset(seed=seed)``: the same start state).
         stop_at_termination: end where the task ends the episode (the Hopper falls), as
             gymnasium does; else run all ``steps``.
@@ -102,5 +109,5 @@ def replay_policy_html(
     x0 = reset_state(task, seed)
     episode = run_episode(task, saved.policy, saved.theta, x0, steps,
                           stop_at_termination=stop_at_termination)  # fmt: skip
-    path = record_rollout_html(_scene(task), episode.states, html_path, meshcat=meshcat)
+    path = record_rollout_html(replay_scene(task), episode.states, html_path, meshcat=meshcat)
     return PolicyReplay(path=Path(path), episode=episode, task_name=task.name, seed=int(seed))

@@ -139,7 +139,7 @@ def outputs_jsonable(value):
     return json.loads(json.dumps(value))
 
 
-def _schedule(config: Config) -> list[int]:
+def evaluation_schedule(config: Config) -> list[int]:
     """The environment-step counts at which a run is scored (the first is 0)."""
     return [int(round(k * config.env_steps / (config.evaluations - 1)))
             for k in range(config.evaluations)]  # fmt: skip
@@ -173,7 +173,7 @@ def train_one(config: Config, task: str, method: str, seed: int, folder: Path,
     else:
         run_, curve = start_run(task, method, seed, config.settings), []
     env_id = run_.task.env_id
-    schedule = _schedule(config)
+    schedule = evaluation_schedule(config)
     scored = {row["env_steps_target"] for row in curve}
 
     def save_progress(status: str) -> None:

@@ -50,7 +50,7 @@ def test_outputs_and_the_shipped_policy_scores_what_the_record_says(done):
     assert entry["floors"] == {"zero": f["zero"]["mean"], "random": f["random"]["mean"]}
     assert r["plant_mean"] is not None and np.isfinite(r["plant_mean"])
     record = json.loads((out / "runs/hopper/shac_abs/seed0/run.json").read_text())
-    assert [row["env_steps_target"] for row in record["curve"]] == g._schedule(cfg)
+    assert [row["env_steps_target"] for row in record["curve"]] == g.evaluation_schedule(cfg)
     for name in ("summary", "curves", "table", "return_hopper"):
         assert (out / summary["files"][name]).exists()
     assert "Hopper-v5" in g.report(summary)

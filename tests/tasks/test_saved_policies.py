@@ -279,6 +279,15 @@ def test_replay_writes_the_meshcat_page_of_the_episode(tasks, tmp_path, meshcat,
     np.testing.assert_array_equal(again.episode.states, expected.states)
 
 
+def test_a_replay_draws_one_frame_per_action(tasks):
+    from drake_abs.diagrams.policy_replay import replay_scene
+
+    for task in tasks.values():  # 8 ms (one plant step) and 50 ms (five) per action
+        scene = replay_scene(task)
+        assert scene.time_step == pytest.approx(task.dt)
+        assert scene.name == task.plant.scene.name
+
+
 def test_replay_refuses_what_it_cannot_replay(tmp_path, meshcat):
     save_policy(tmp_path / "bare", LinearPolicy(2, 1), np.zeros(3))
     with pytest.raises(ValueError, match="acts in no task"):
