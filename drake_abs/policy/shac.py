@@ -133,6 +133,9 @@ class ShacConfig:
         sigma_end: if given, sigma decays linearly to it over ``sigma_decay_steps`` environment
             steps (then stays).
         sigma_decay_steps: environment steps of that decay (> 0 with ``sigma_end``).
+        actor_lr_decay_steps: if > 0, the policy's step size decays linearly from ``actor_lr``
+            to 0 over this many environment steps (SHAC's linear schedule, Xu et al. 2022);
+            0: constant.
         policy: ``"linear"`` (u = W z + b) or ``"mlp"`` (tanh hidden layers ``hidden``).
         hidden: the MLP policy's hidden widths.
         actor_lr: Adam's step size for the policy.
@@ -159,6 +162,7 @@ class ShacConfig:
     sigma: float = 0.1
     sigma_end: float | None = None
     sigma_decay_steps: int = 0
+    actor_lr_decay_steps: int = 0
     policy: Literal["linear", "mlp"] = "linear"
     hidden: tuple[int, ...] = (64, 64)
     actor_lr: float = 2e-3
@@ -183,6 +187,7 @@ class ShacConfig:
         as_count(self.critic_minibatches, "critic_minibatches", minimum=1)
         as_count(self.recent_episodes, "recent_episodes", minimum=1)
         as_count(self.sigma_decay_steps, "sigma_decay_steps", minimum=0)
+        as_count(self.actor_lr_decay_steps, "actor_lr_decay_steps", minimum=0)
         for name in ("gamma", "lam", "target_critic_alpha"):
             v = getattr(self, name)
             if not (np.isfinite(v) and 0 <= v <= 1):
@@ -235,6 +240,12 @@ class ShacConfig:
     def horizon(self) -> int:
         """h: the window's length in steps."""
         return self.episode_length if self.window is None else min(self.window, self.episode_length)
+
+    def actor_lr_at(self, env_steps: int) -> float:
+        """The policy's step size after ``env_steps`` environment steps."""
+        if self.actor_lr_decay_steps == 0:
+            return float(self.actor_lr)
+        return float(self.actor_lr * max(0.0, 1.0 - env_steps / self.actor_lr_decay_steps))
 
     def sigma_at(self, env_steps: int) -> float:
         """The exploration std after ``env_steps`` environment steps."""
@@ -665,6 +676,7 @@ class ShacTrainer:
         if c.max_grad_norm is not None and grad_norm > c.max_grad_norm:
             grad = grad * (c.max_grad_norm / grad_norm)
         if win.used.any():
+            s.actor_opt.lr = c.actor_lr_at(s.env_steps)
             s.theta = s.actor_opt.step(s.theta, grad)
 
         counted = np.arange(H)[None, :] < win.lengths[:, None]

@@ -249,6 +249,27 @@ def test_bad_settings_are_refused():
                         remaining=np.array([0, 3]), gamma=0.9)  # fmt: skip
 
 
+def test_actor_step_size_decays_linearly_to_zero():
+    from dataclasses import replace
+
+    c = ShacConfig(actor_lr=4e-3, actor_lr_decay_steps=1000)
+    assert c.actor_lr_at(0) == 4e-3 and c.actor_lr_at(250) == pytest.approx(3e-3)
+    assert c.actor_lr_at(1000) == 0.0 and c.actor_lr_at(5000) == 0.0
+    assert ShacConfig(actor_lr=4e-3).actor_lr_at(10**9) == 4e-3
+    with pytest.raises(ValueError, match="actor_lr_decay_steps"):
+        ShacConfig(actor_lr_decay_steps=-1)
+    # past the decay the policy no longer moves; before it, the run differs from a constant one
+    decayed = _trainer(replace(SMALL, actor_lr_decay_steps=60), 3)
+    decayed.train(4)
+    assert decayed.state.env_steps >= 60
+    frozen = decayed.state.theta.copy()
+    decayed.train(6)
+    np.testing.assert_array_equal(decayed.state.theta, frozen)
+    constant = _trainer(SMALL, 3)
+    constant.train(4)
+    assert not np.array_equal(constant.state.theta, frozen)
+
+
 def test_sigma_schedule():
     c = ShacConfig(sigma=0.4, sigma_end=0.1, sigma_decay_steps=100)
     assert c.sigma_at(0) == 0.4 and c.sigma_at(50) == pytest.approx(0.25)
