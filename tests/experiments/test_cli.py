@@ -121,8 +121,30 @@ def test_experiment_names_in_either_spelling(spelling, monkeypatch, tmp_path):
     monkeypatch.setattr(cli, "_run_standard", lambda name, out, **k: calls.append((name, k)) or 0)
     assert main(["experiment", spelling, "--test-size", "--out", str(tmp_path)]) == 0
     assert calls == [
-        ("gradient-variance", {"test_size": True, "ray": False, "address": None, "workers": None})
+        (
+            "gradient-variance",
+            {"test_size": True, "ray": False, "address": None, "workers": None, "config": None},
+        )
     ]
+
+
+def test_experiment_settings_are_applied_and_bad_ones_named(monkeypatch, tmp_path, capsys):
+    calls = []
+    monkeypatch.setattr(cli, "_run_standard", lambda name, out, **k: calls.append((name, k)) or 0)
+    args = ["experiment", "gym-locomotion", "--test-size", "--out", str(tmp_path)]
+    sets = ["--set", "env_steps=320", "--set", "settings.shac.actor_lr=0.01",
+            "--set", "methods=[ars]"]  # fmt: skip
+    assert main(args + sets) == 0
+    config = calls[0][1]["config"]
+    assert config.env_steps == 320 and config.methods == ("ars",)
+    assert config.settings.shac.actor_lr == 0.01
+    assert config.settings.shac.envs == 4  # the rest of the test size kept
+    for bad, says in (("settings.shac.nope=1", "unknown setting"),
+                      ("env_steps=1,2", "one value per setting"),
+                      ("env_steps=many", "env_steps")):  # fmt: skip
+        with pytest.raises(SystemExit) as err:
+            main(args + ["--set", bad])
+        assert err.value.code == 2 and says in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("spelling", ["box_push", "box-push", "solo12-drop", "gym_half-cheetah"])
