@@ -202,6 +202,17 @@ def test_the_grid_is_seeds_times_settings_split_on_top_level_commas():
     assert err.value.argument == "--seeds"
 
 
+def test_dotted_settings_reach_nested_groups():
+    points = build_grid("gym-locomotion", settings=["settings.shac.window=8,16"], test_size=True)
+    assert points == [{"settings.shac.window": 8}, {"settings.shac.window": 16}]
+    config = ExperimentPoint("gym-locomotion", test_size=True).config(points[1])
+    assert config.settings.shac.window == 16 and config.settings.shac.envs == 4
+    with pytest.raises(GridError, match="unknown setting 'settings.shac.nope'"):
+        build_grid("gym-locomotion", settings=["settings.shac.nope=1"], test_size=True)
+    with pytest.raises(GridError, match="settings.shac.window"):
+        build_grid("gym-locomotion", settings=["settings.shac.window=wide"], test_size=True)
+
+
 # --------------------------------------------------------------------------- a real experiment
 
 
