@@ -78,8 +78,21 @@ class ExperimentPoint:
             outputs.set_progress(previous)
 
     def describe(self) -> dict:
-        """What sweep.json and every point.json record as the sweep's function."""
-        return {"experiment": self.experiment, "test_size": self.test_size}
+        """What sweep.json and every point.json record as the sweep's function: the experiment,
+        its whole base Config (every default a point's values do not override) and the
+        drake-abs version. A finished point is reused only when all of it matches: a changed
+        default or another release recomputes it."""
+        import dataclasses
+        import json
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            ours = version("drake-abs")
+        except PackageNotFoundError:  # a checkout that is not installed
+            ours = "unknown"
+        config = json.loads(json.dumps(dataclasses.asdict(self.base_config()), default=str))
+        return {"experiment": self.experiment, "test_size": self.test_size, "config": config,
+                "drake_abs_version": ours}  # fmt: skip
 
 
 # -------------------------------------------------------------------------------------- the grid
