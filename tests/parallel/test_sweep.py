@@ -358,9 +358,11 @@ def test_the_command_line_runs_a_sweep_on_ray(cluster, tmp_path, capsys):
     assert f"traceback in {folder}/points/seed=0,horizons=10,batches=1/point.json" in captured.out
     assert "2 of 4 points failed" in captured.err
     doc = json.loads((folder / "sweep.json").read_text())
-    assert doc["backend"] == "ray" and doc["fn"] == {
-        "experiment": "gradient-variance", "test_size": True,
-    }  # fmt: skip
+    assert (
+        doc["backend"] == "ray"
+        and doc["fn"] == ExperimentPoint("gradient-variance", test_size=True).describe()
+    )
+    assert doc["fn"]["experiment"] == "gradient-variance" and doc["fn"]["test_size"] is True
     assert [p["status"] for p in doc["points"]] == ["done", "failed", "done", "failed"]
     assert (folder / "sweep.png").is_file() and (folder / "sweep.csv").is_file()
     # resumed: only the failed points run again (and fail again)
