@@ -263,15 +263,19 @@ def test_the_hyperparameters_keep_the_data_per_update_with_n_envs():
     ppo = baseline_settings("hopper", "ppo", n_envs=8)["hyperparameters"]
     assert (ppo["n_steps"], ppo["batch_size"], ppo["n_epochs"]) == (64, 32, 5)  # 8 x 64 = 512
     assert baseline_settings("hopper", "ppo", n_envs=1) == baseline_settings("hopper", "ppo")
+    with pytest.raises(ValueError, match="n_envs must divide PPO's n_steps = 512"):
+        baseline_settings("hopper", "ppo", n_envs=3)
+    with pytest.raises(ValueError, match="n_envs must be 1 for ARS"):
+        baseline_settings("hopper", "ars", n_envs=2)
+
+
+def test_sacs_gradient_steps_follow_n_envs():
+    pytest.importorskip("stable_baselines3")  # SAC's own defaults are read from the library
     sac = baseline_settings("half_cheetah", "sac", n_envs=16)["hyperparameters"]
     assert sac == {"learning_starts": 10000, "gradient_steps": 16}
     assert vectorised_hyperparameters("sac", {"gradient_steps": -1}, 4) == {"gradient_steps": -1}
     assert vectorised_hyperparameters("sac", {"train_freq": 4, "gradient_steps": 2}, 4) == {
         "train_freq": 4, "gradient_steps": 8}  # fmt: skip
-    with pytest.raises(ValueError, match="n_envs must divide PPO's n_steps = 512"):
-        baseline_settings("hopper", "ppo", n_envs=3)
-    with pytest.raises(ValueError, match="n_envs must be 1 for ARS"):
-        baseline_settings("hopper", "ars", n_envs=2)
     with pytest.raises(ValueError, match="train_freq must count steps"):
         vectorised_hyperparameters("sac", {"train_freq": (1, "episode")}, 2)
     with pytest.raises(ValueError, match="n_envs must be"):
