@@ -348,7 +348,7 @@ def _plot(task: str, summary: dict, records: dict, path: Path) -> Path:
     axes[0].set_xlabel("environment steps of training (our plant)")
     axes[1].set_xlabel("wall-clock training time (s)")
     axes[0].legend(fontsize=8)
-    fig.suptitle(f"{entry['env_id']}: final-iterate return in MuJoCo's own environment "
+    fig.suptitle(f"{entry['env_id']}: return of the iterate in MuJoCo's own environment "
                  "(mean and min-max over training seeds)")  # fmt: skip
     return outputs.save_figure(fig, path)
 
