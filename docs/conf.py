@@ -63,6 +63,8 @@ autodoc_default_options = {
     "ignore-module-all": True,
 }
 autodoc_member_order = "bysource"
+# the optional baselines' libraries (the ``baselines`` extra) are not installed for the docs
+autodoc_mock_imports = ["stable_baselines3", "sb3_contrib", "torch"]
 autodoc_typehints = "signature"
 autodoc_preserve_defaults = True
 autoclass_content = "class"
@@ -82,7 +84,7 @@ nitpick_ignore_regex = [
     (
         r"py:.*",
         r"(numpy|np|npt|scipy|sp|pydrake|numba|nb|osqp|pinocchio|pin"
-        r"|mujoco|gymnasium|matplotlib|yaml|meshcat|collections|typing|typing_extensions"
+        r"|mujoco|gymnasium|stable_baselines3|sb3_contrib|torch|matplotlib|yaml|meshcat|collections|typing|typing_extensions"
         r"|pathlib|os|io|enum|dataclasses|abc|functools|types|concurrent|multiprocessing"
         r"|warnings|argparse|json|contextlib)(\..*)?",
     ),

@@ -5,12 +5,14 @@ For every task, method and training seed (a *run*, :mod:`drake_abs.tasks.trainin
 method trains on our plant (the task's scene at gymnasium's control period; the method's contact
 smoothing; gymnasium's reset noise on every episode, 1000-step episodes) until it has used
 ``env_steps`` environment steps. Along the way, ``evaluations`` times, the current policy is
-scored in MuJoCo's own ``gymnasium.make(env_id)`` (:func:`drake_abs.reference.gym_scoring.
-score_policy`: one episode per reset seed ``0 .. score_seeds - 1``, at most 1000 steps, actions
-clipped to the action space): the curves of return against environment steps and against
-wall-clock training time. The final iterate (never the best by any score) is scored the same
-way, and on our plant (exact contact, the same reset seeds: :func:`drake_abs.tasks.
-published_policies.score_on_plant`), and written as a policy file anyone can load,
+scored in MuJoCo's own ``gymnasium.make(env_id)``
+(:func:`drake_abs.reference.gym_scoring.score_policy`: one episode per reset seed
+``0 .. score_seeds - 1``, at most 1000 steps, actions clipped to the action space): the curves
+of return against environment steps and against wall-clock training time. The final iterate
+(never the best by any score) is scored the same way, and on our plant (exact contact, the
+same reset seeds:
+:func:`drake_abs.tasks.published_policies.score_on_plant`), and written as a policy file anyone
+can load,
 ``policies/<env id>/<method>/seed<k>.npz``. The zero-action and uniform-random-action floors of
 each environment (:func:`~drake_abs.reference.gym_scoring.floors`, the same reset seeds) are
 printed beside the scores.
@@ -46,9 +48,10 @@ from drake_abs.policy.shac import ShacConfig
 from drake_abs.tasks.training_runs import RunSettings
 
 NAME = "gym-locomotion"
-#: SHAC's settings here: the policy's step size 5e-3, decayed linearly to 0 over the default
-#: budget (SHAC's schedule; with a constant step size a Hopper run peaked at 1416 in MuJoCo at
-#: 400k steps and fell below 200 by 700k). Change ``actor_lr_decay_steps`` with ``env_steps``.
+#: SHAC's settings in this experiment. The policy's step size 5e-3, decayed linearly to 0 over
+#: the default budget (SHAC's schedule; with a constant step size a Hopper run peaked at 1416
+#: in MuJoCo at 400k steps and fell below 200 by 700k). Change ``actor_lr_decay_steps`` with
+#: ``env_steps``.
 SHAC = ShacConfig(actor_lr=5e-3, actor_lr_decay_steps=1_000_000)
 TASKS = ("hopper", "half_cheetah")
 METHODS = ("shac_abs", "ars")

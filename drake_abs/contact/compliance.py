@@ -12,7 +12,7 @@ parameters"), in our words. A row has a residual ``r`` (m): the contact's signed
 its margin (the row exists only while ``r < 0``, within the margin), its velocity ``J v`` (m/s,
 at the start of the step) and an approximation ``A_hat`` of its diagonal of ``J M^-1 J^T``
 (1/kg: MuJoCo takes it from the bodies' inverse weights at the model's reference pose, not from
-the current state). From ``solimp = (d0, dwidth, width, midpoint, power)`` the impedance
+the current state). From ``solimp = (d0, dwidth, width, midpoint, power)`` the impedance::
 
     d(r) = d0 + y(|r| / width) (dwidth - d0),   y(x) = x^p / m^(p-1)               (x <= m)
                                                  y(x) = 1 - (1 - x)^p / (1 - m)^(p-1) (x > m)
@@ -75,7 +75,7 @@ import numpy as np
 #: MuJoCo's bounds on the impedance (and the midpoint), and its smallest positive value
 MIN_IMPEDANCE, MAX_IMPEDANCE, MIN_VALUE = 1e-4, 0.9999, 1e-15
 
-#: MuJoCo's defaults: solref (timeconst s, dampratio) and solimp (d0, dwidth, width m,
+#: MuJoCo's default solref (timeconst in s, dampratio) and solimp (d0, dwidth, width in m,
 #: midpoint, power)
 DEFAULT_SOLREF = (0.02, 1.0)
 DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
@@ -168,9 +168,10 @@ class RowTerms:
         return (h * self.dR_dmu * lam_n)[..., None] * dmu[None]
 
     def apply(self, F: np.ndarray, z: np.ndarray, phi: np.ndarray, h: float) -> None:
-        """Turn the hard LCP ``(F, z)`` of :func:`~drake_abs.contact.stewart_trinkle
-        .assemble_lcp` (normal rows first, ``z_n = phi + h J_n v_free``) into the regularised
-        one, in place: ``F_ii += h R_i``, ``z_i += c_i - phi_i``."""
+        """Turn the hard LCP ``(F, z)`` of
+        :func:`~drake_abs.contact.stewart_trinkle.assemble_lcp` (normal rows first,
+        ``z_n = phi + h J_n v_free``) into the regularised one, in place: ``F_ii += h R_i``,
+        ``z_i += c_i - phi_i``."""
         n = self.R.shape[1]
         rows = np.arange(n)
         F[:, rows, rows] += h * self.R

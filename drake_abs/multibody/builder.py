@@ -64,9 +64,9 @@ class SceneModel:
 
     @functools.cached_property
     def joint_friction(self) -> np.ndarray:
-        """The dry friction bound of each velocity (nv,) (N m or N; 0: none), from the scene's
-        MJCF files (:func:`scene_joint_friction`), which the step takes as complementarity rows
-        (:mod:`drake_abs.multibody.joint_friction`)."""
+        """The dry friction bound of each velocity, (nv,) in N m or N (0 where none), from the
+        scene's MJCF files (:func:`scene_joint_friction`), which the step takes as
+        complementarity rows (:mod:`drake_abs.multibody.joint_friction`)."""
         return scene_joint_friction(self.scene, self.plant)
 
     def model_report(self) -> dict:

@@ -55,9 +55,10 @@ Where this differs from the authors' code:
   ``env.reset()`` before each rollout; ``paired_starts=False`` does that);
 - one process and one seeded generator (directions, resets) instead of Ray workers with a shared
   noise table;
-- the normaliser's std is the population std (ddof 0, :class:`~drake_abs.policy
-  .observation_normalizer.RunningMeanStd`) where theirs is the sample std, and z = (o - mean) /
-  std where theirs divides by std + 1e-8; an entry whose std is below 1e-7 gets weight 0 in both;
+- the normaliser's std is the population std (ddof 0,
+  :class:`~drake_abs.policy.observation_normalizer.RunningMeanStd`) where theirs is the
+  sample std, and z = (o - mean) / std where theirs divides by std + 1e-8; an entry whose std
+  is below 1e-7 gets weight 0 in both;
 - the top b are exactly b (theirs keeps ties at the percentile);
 - no evaluation inside the loop (theirs rolls out the unperturbed policy on 100 episodes every
   10 iterations, not counted): the returns logged are those of the iteration's perturbed

@@ -154,8 +154,8 @@ class MLPPolicy:
         return self._backward(theta, x, g_u, summed=False)
 
     def vjp_sum(self, theta, x, g_u) -> tuple[np.ndarray, np.ndarray]:
-        """(g_u du/dx (M, nx), sum_m g_u[m] du/dtheta[m] (P,)): :meth:`vjp` with the parameter
-        part summed over the batch, without forming one product per row (the gradient of a
+        """(g_u du/dx (M, nx), sum_m g_u[m] du/dtheta[m] (P,)): ``vjp`` with the parameter part
+        summed over the batch, without forming one product per row (the gradient of a
         loss summed over samples, e.g. a critic's fit)."""
         return self._backward(theta, x, g_u, summed=True)
 

@@ -371,8 +371,8 @@ def window_gradient(
         remaining: (N,) steps left in each episode (>= 1): a window is cut there (truncated,
             bootstrapped).
         gamma: discount in [0, 1].
-        value: the tail ``V(x)`` with dV/dx (:class:`~drake_abs.policy.value_function
-            .StateValue`); None: V = 0.
+        value: the tail ``V(x)`` with dV/dx
+            (:class:`~drake_abs.policy.value_function.StateValue`); None: V = 0.
         chunk: forward steps per engine call.
         on_unconverged: ``"drop"``, ``"flag"`` or ``"raise"``.
         score_reward: another reward summed over the same counted steps (``Window.scores``),

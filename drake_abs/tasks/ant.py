@@ -306,7 +306,7 @@ class AntReward:
         return self.contact_wrenches(x_next, step.impulse, step.friction_impulse, self.dt)
 
     def contact_cost(self, wrenches) -> np.ndarray:
-        """w_k |clip(F)|^2 (M,) of wrenches (M, nb, 6)."""
+        """``w_k |clip(F)|^2`` (M,) of wrenches (M, nb, 6)."""
         lo, hi = self.contact_force_range
         F = np.clip(np.asarray(wrenches, dtype=float), lo, hi)
         return self.contact_cost_weight * np.sum(F * F, axis=(1, 2))

@@ -398,10 +398,12 @@ class StepLog(gymnasium.Wrapper):
         self.log = log
 
     def reset(self, **kwargs):
+        """The wrapped environment's reset; the log starts new episodes."""
         self.log.new_episodes()
         return self.env.reset(**kwargs)
 
     def step(self, action):
+        """The wrapped environment's step, its reward and end recorded in the log."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.log.record([reward], [terminated or truncated], [info])
         return obs, reward, terminated, truncated, info
