@@ -87,7 +87,7 @@ from drake_abs.policy.ars_v2 import (
     ars_update,
     perturbations,
 )
-from drake_abs.policy.checkpoints import read_checkpoint, write_checkpoint
+from drake_abs.policy.checkpoints import read_checkpoint, train_resumable, write_checkpoint
 from drake_abs.policy.observation_normalizer import RunningMeanStd
 from drake_abs.policy.shac import TrainingEnvironment
 
@@ -415,25 +415,12 @@ class ArsTrainer:
         total), or ``max_seconds`` of wall time in this call have passed, or ``state.env_steps``
         has reached ``max_env_steps`` (each checked after a whole iteration); save a checkpoint
         every ``checkpoint_every`` iterations and at the end (with ``checkpoint``).
-        ``callback(row)`` after each iteration. Returns the whole log."""
-        iterations = as_count(iterations, "iterations")
-        every = as_count(checkpoint_every, "checkpoint_every", minimum=1)
-        if max_env_steps is not None:
-            max_env_steps = as_count(max_env_steps, "max_env_steps", minimum=1)
-        began = time.perf_counter()
-        while self.state.iteration < iterations:
-            if max_env_steps is not None and self.state.env_steps >= max_env_steps:
-                break
-            row = self.iterate()
-            if callback is not None:
-                callback(row)
-            if checkpoint is not None and self.state.iteration % every == 0:
-                self.save(checkpoint)
-            if max_seconds is not None and time.perf_counter() - began >= max_seconds:
-                break
-        if checkpoint is not None:
-            self.save(checkpoint)
-        return self.state.rows
+        ``callback(row)`` after each iteration. Returns the whole log
+        (:func:`~drake_abs.policy.checkpoints.train_resumable`)."""
+        return train_resumable(
+            self, iterations, checkpoint=checkpoint, checkpoint_every=checkpoint_every,
+            max_seconds=max_seconds, max_env_steps=max_env_steps, callback=callback,
+        )  # fmt: skip
 
     # -- checkpoints ------------------------------------------------------------------------
 

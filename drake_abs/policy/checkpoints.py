@@ -1,5 +1,7 @@
 """Training checkpoints: one pickle file holding a trainer's whole state, written atomically and
-read back with its format name and version checked.
+read back with its format name and version checked; and the one loop that runs a resumable
+trainer (``iterate()``, ``save(path)``, ``state.iteration``, ``state.env_steps``, ``state.rows``)
+to a budget with periodic checkpoints (:func:`train_resumable`).
 
 A checkpoint is for this library's own use (it is not a published format: a policy ships as a
 policy file, :mod:`drake_abs.policy.policy_files`), and like any pickle it should only be loaded
@@ -10,9 +12,12 @@ from __future__ import annotations
 
 import os
 import pickle
+import time
 from pathlib import Path
 
-__all__ = ["read_checkpoint", "write_checkpoint"]
+from drake_abs._validation import as_count
+
+__all__ = ["read_checkpoint", "train_resumable", "write_checkpoint"]
 
 
 def write_checkpoint(path: str | Path, payload: dict, *, kind: str, version: int) -> Path:
@@ -47,3 +52,39 @@ def read_checkpoint(path: str | Path, *, kind: str, version: int) -> dict:
             f"({version})"
         )
     return {k: v for k, v in payload.items() if k not in ("format", "version")}
+
+
+def train_resumable(
+    trainer,
+    iterations: int,
+    *,
+    checkpoint: str | Path | None = None,
+    checkpoint_every: int = 10,
+    max_seconds: float | None = None,
+    max_env_steps: int | None = None,
+    callback=None,
+) -> list[dict]:
+    """Run ``trainer.iterate()`` until ``trainer.state.iteration == iterations`` (a resumed run
+    continues to the same total), or ``max_seconds`` of wall time in this call have passed, or
+    ``trainer.state.env_steps`` has reached ``max_env_steps`` (each checked after a whole
+    iteration); ``trainer.save(checkpoint)`` every ``checkpoint_every`` iterations and at the
+    end (with ``checkpoint``); ``callback(row)`` after each iteration. Returns the whole log,
+    ``trainer.state.rows``."""
+    iterations = as_count(iterations, "iterations")
+    every = as_count(checkpoint_every, "checkpoint_every", minimum=1)
+    if max_env_steps is not None:
+        max_env_steps = as_count(max_env_steps, "max_env_steps", minimum=1)
+    began = time.perf_counter()
+    while trainer.state.iteration < iterations:
+        if max_env_steps is not None and trainer.state.env_steps >= max_env_steps:
+            break
+        row = trainer.iterate()
+        if callback is not None:
+            callback(row)
+        if checkpoint is not None and trainer.state.iteration % every == 0:
+            trainer.save(checkpoint)
+        if max_seconds is not None and time.perf_counter() - began >= max_seconds:
+            break
+    if checkpoint is not None:
+        trainer.save(checkpoint)
+    return trainer.state.rows

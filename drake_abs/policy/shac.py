@@ -60,8 +60,6 @@ full-state policy ``inner(obs(x))``): a :class:`drake_abs.tasks.locomotion.Locom
 
 from __future__ import annotations
 
-import os
-import pickle
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
@@ -78,6 +76,7 @@ from drake_abs.contact.unconverged import (
 )
 from drake_abs.engine import record, reverse_pass
 from drake_abs.engine.protocols import Policy, TransitionReward, check_reward
+from drake_abs.policy.checkpoints import read_checkpoint, train_resumable, write_checkpoint
 from drake_abs.policy.methods import method as registry_method
 from drake_abs.policy.observation_normalizer import NormalizedPolicy, RunningMeanStd
 from drake_abs.policy.policies import LinearPolicy, MLPPolicy
@@ -745,53 +744,26 @@ class ShacTrainer:
         """Iterate until ``state.iteration == iterations`` (a resumed run continues to the same
         total) or ``max_seconds`` of wall time in this call have passed; save a checkpoint every
         ``checkpoint_every`` iterations and at the end (with ``checkpoint``). ``callback(row)``
-        after each iteration. Returns the whole log."""
-        iterations = as_count(iterations, "iterations")
-        every = as_count(checkpoint_every, "checkpoint_every", minimum=1)
-        began = time.perf_counter()
-        while self.state.iteration < iterations:
-            row = self.iterate()
-            if callback is not None:
-                callback(row)
-            if checkpoint is not None and self.state.iteration % every == 0:
-                self.save(checkpoint)
-            if max_seconds is not None and time.perf_counter() - began >= max_seconds:
-                break
-        if checkpoint is not None:
-            self.save(checkpoint)
-        return self.state.rows
+        after each iteration. Returns the whole log
+        (:func:`~drake_abs.policy.checkpoints.train_resumable`)."""
+        return train_resumable(
+            self, iterations, checkpoint=checkpoint, checkpoint_every=checkpoint_every,
+            max_seconds=max_seconds, callback=callback,
+        )  # fmt: skip
 
     # -- checkpoints ------------------------------------------------------------------------
 
-    def save(self, path: str | Path) -> None:
-        """Write the whole training state to ``path`` (atomically: a temporary file renamed)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        payload = {
-            "format": CHECKPOINT_FORMAT, "version": _CHECKPOINT_VERSION,
-            "config": asdict(self.config), "seed": self.seed, "state": self.state,
-        }  # fmt: skip
-        tmp = path.with_name(path.name + ".tmp")
-        with tmp.open("wb") as f:
-            pickle.dump(payload, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
+    def save(self, path: str | Path) -> Path:
+        """Write the whole training state to ``path`` (:mod:`drake_abs.policy.checkpoints`)."""
+        payload = {"config": asdict(self.config), "seed": self.seed, "state": self.state}
+        return write_checkpoint(path, payload, kind=CHECKPOINT_FORMAT,
+                                version=_CHECKPOINT_VERSION)  # fmt: skip
 
     @classmethod
     def load(cls, path: str | Path, env: TrainingEnvironment, *, score_reward=None) -> ShacTrainer:
         """A trainer continuing from the checkpoint at ``path`` in ``env`` (the same
         environment the run was started in: it is not stored)."""
-        try:
-            with Path(path).open("rb") as f:
-                payload = pickle.load(f)  # noqa: S301 (the library's own checkpoint)
-        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as err:
-            raise ValueError(f"path must be a {CHECKPOINT_FORMAT!r} file; got {path}") from err
-        if not (isinstance(payload, dict) and payload.get("format") == CHECKPOINT_FORMAT):
-            raise ValueError(f"path must be a {CHECKPOINT_FORMAT!r} file; got {path}")
-        if payload["version"] > _CHECKPOINT_VERSION:
-            raise ValueError(
-                f"checkpoint version {payload['version']} is newer than this library's "
-                f"({_CHECKPOINT_VERSION})"
-            )
+        payload = read_checkpoint(path, kind=CHECKPOINT_FORMAT, version=_CHECKPOINT_VERSION)
         config = ShacConfig(**payload["config"])
         trainer = cls(env, config, payload["seed"], score_reward=score_reward)
         state = payload["state"]
