@@ -176,7 +176,43 @@ def _healthy_ranges(task_name: str) -> HealthyRanges | None:
     return reward.healthy if reward.healthy_reward != 0 else None
 
 
-class ShacRun:
+class TrainerRun:
+    """What every run here shares: a trainer with ``state`` (``env_steps``, ``seconds``,
+    ``rows``, ``theta``), ``iterate()``, ``save(path)`` and ``full_state_policy()`` on
+    ``task``. Subclasses build them and say how to ``load`` one and what ``recent_return``
+    is."""
+
+    task: LocomotionTask
+    trainer: ShacTrainer | ArsTrainer
+    method: str
+    seed: int
+
+    @property
+    def env_steps(self) -> int:
+        return int(self.trainer.state.env_steps)
+
+    @property
+    def seconds(self) -> float:
+        return float(self.trainer.state.seconds)
+
+    @property
+    def rows(self) -> list[dict]:
+        """The trainer's log, one row per iteration."""
+        return self.trainer.state.rows
+
+    def iterate(self) -> dict:
+        return self.trainer.iterate()
+
+    def save(self, path: str | Path) -> None:
+        self.trainer.save(path)
+
+    def policy_file(self, **metadata) -> PolicyFile:
+        meta = {"method": self.method, "seed": self.seed, "training_steps": self.env_steps}
+        policy = self.trainer.full_state_policy()
+        return task_policy_file(self.task, policy, self.trainer.state.theta, **(meta | metadata))
+
+
+class ShacRun(TrainerRun):
     """A :class:`~drake_abs.policy.shac.ShacTrainer` run (``shac`` and ``fopg_episode``
     methods) as a :class:`TrainingRun`."""
 
@@ -195,19 +231,6 @@ class ShacRun:
         self.trainer = ShacTrainer(self.task, config, seed, score_reward=self.score_reward)
 
     @property
-    def env_steps(self) -> int:
-        return int(self.trainer.state.env_steps)
-
-    @property
-    def seconds(self) -> float:
-        return float(self.trainer.state.seconds)
-
-    @property
-    def rows(self) -> list[dict]:
-        """The trainer's log, one row per iteration."""
-        return self.trainer.state.rows
-
-    @property
     def recent_return(self) -> float | None:
         """Mean return, by gymnasium's reward, of the last episodes the trainer completed (None
         before the first)."""
@@ -216,24 +239,13 @@ class ShacRun:
         row = self.rows[-1]
         return row["recent_score"] if row.get("recent_score") is not None else row["recent_return"]
 
-    def iterate(self) -> dict:
-        return self.trainer.iterate()
-
-    def save(self, path: str | Path) -> None:
-        self.trainer.save(path)
-
     def load(self, path: str | Path) -> ShacRun:
         """This run continued from the checkpoint at ``path``."""
         self.trainer = ShacTrainer.load(path, self.task, score_reward=self.score_reward)
         return self
 
-    def policy_file(self, **metadata) -> PolicyFile:
-        policy = self.trainer.full_state_policy()
-        meta = {"method": self.method, "seed": self.seed, "training_steps": self.env_steps}
-        return task_policy_file(self.task, policy, self.trainer.state.theta, **(meta | metadata))
 
-
-class ArsRun:
+class ArsRun(TrainerRun):
     """An :class:`~drake_abs.policy.ars_trainer.ArsTrainer` run (the ``ars`` method) as a
     :class:`TrainingRun`, on the exact plant with gymnasium's reward."""
 
@@ -247,36 +259,14 @@ class ArsRun:
         self.trainer = ArsTrainer(self.task, config, seed)
 
     @property
-    def env_steps(self) -> int:
-        return int(self.trainer.state.env_steps)
-
-    @property
-    def seconds(self) -> float:
-        return float(self.trainer.state.seconds)
-
-    @property
-    def rows(self) -> list[dict]:
-        return self.trainer.state.rows
-
-    @property
     def recent_return(self) -> float | None:
         """Mean return (gymnasium's reward) of the last iteration's episodes."""
         return self.rows[-1]["return_mean"] if self.rows else None
 
-    def iterate(self) -> dict:
-        return self.trainer.iterate()
-
-    def save(self, path: str | Path) -> None:
-        self.trainer.save(path)
-
     def load(self, path: str | Path) -> ArsRun:
+        """This run continued from the checkpoint at ``path``."""
         self.trainer = ArsTrainer.load(path, self.task)
         return self
-
-    def policy_file(self, **metadata) -> PolicyFile:
-        meta = {"method": self.method, "seed": self.seed, "training_steps": self.env_steps}
-        policy = self.trainer.full_state_policy()
-        return task_policy_file(self.task, policy, self.trainer.state.theta, **(meta | metadata))
 
 
 def _shac_fields(settings: RunSettings) -> dict:
