@@ -56,6 +56,7 @@ __all__ = [
     "ArsRun",
     "RunSettings",
     "ShacRun",
+    "TrainerRun",
     "TrainingRun",
     "resume_run",
     "start_run",
