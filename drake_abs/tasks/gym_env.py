@@ -81,18 +81,10 @@ class DrakeAbsEnv(gymnasium.Env):
         render_mode: str | None = None,
         **task_options,
     ):
-        if isinstance(task, str):
-            task = locomotion_task(task, **task_options)
-        elif task_options:
-            raise ValueError(
-                f"task_options {sorted(task_options)} apply to a task given by name only"
-            )
+        task = task_of(task, task_options)
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (no rendering); got {render_mode!r}")
-        self.max_episode_steps = (
-            None if max_episode_steps is None
-            else as_count(max_episode_steps, "max_episode_steps", minimum=1)
-        )  # fmt: skip
+        self.max_episode_steps = episode_limit(max_episode_steps)
         self.task = task
         self.render_mode = None
         self.dt = float(task.dt)
@@ -164,6 +156,23 @@ class TaskSteps:
     terminated: np.ndarray
     converged: np.ndarray
     info: dict[str, np.ndarray]
+
+
+def task_of(task: LocomotionTask | str, task_options: dict) -> LocomotionTask:
+    """``task`` itself, or the task of that name built with ``task_options`` (which apply to a
+    task given by name only: ValueError otherwise)."""
+    if isinstance(task, str):
+        return locomotion_task(task, **task_options)
+    if task_options:
+        raise ValueError(f"task_options {sorted(task_options)} apply to a task given by name only")
+    return task
+
+
+def episode_limit(max_episode_steps: int | None) -> int | None:
+    """``max_episode_steps`` checked: a whole number >= 1, or None (no limit)."""
+    if max_episode_steps is None:
+        return None
+    return as_count(max_episode_steps, "max_episode_steps", minimum=1)
 
 
 def step_task(task, x, u) -> TaskSteps:

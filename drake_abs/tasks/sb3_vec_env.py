@@ -52,8 +52,8 @@ from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvStepReturn
 
 from drake_abs._validation import as_count
-from drake_abs.tasks.gym_env import step_task
-from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
+from drake_abs.tasks.gym_env import episode_limit, step_task, task_of
+from drake_abs.tasks.locomotion import LocomotionTask
 
 __all__ = ["DrakeAbsVecEnv"]
 
@@ -84,17 +84,9 @@ class DrakeAbsVecEnv(VecEnv):
         seed: int | None = None,
         **task_options,
     ):
-        if isinstance(task, str):
-            task = locomotion_task(task, **task_options)
-        elif task_options:
-            raise ValueError(
-                f"task_options {sorted(task_options)} apply to a task given by name only"
-            )
+        task = task_of(task, task_options)
         n_envs = as_count(n_envs, "n_envs", minimum=1)
-        self.max_episode_steps = (
-            None if max_episode_steps is None
-            else as_count(max_episode_steps, "max_episode_steps", minimum=1)
-        )  # fmt: skip
+        self.max_episode_steps = episode_limit(max_episode_steps)
         self.task = task
         self.render_mode = None
         self.dt = float(task.dt)
