@@ -413,3 +413,24 @@ def test_smooth_survive_reward_has_its_gradient_and_keeps_gymnasiums_termination
     assert (r < plain.transition(x, u, xn)[0])[:2].all()  # near a bound: less than the full bonus
     with pytest.raises(ValueError, match="smooth_survive needs healthy"):
         GymLocomotionReward.half_cheetah(0.05, smooth_survive=SmoothHealthy())
+
+
+@pytest.mark.parametrize(
+    "options, says",
+    [
+        ({"control_period": float("nan")}, "control_period must be a finite number > 0"),
+        ({"control_period": -0.01}, "control_period must be a finite number > 0"),
+        ({"control_period": "fast"}, "control_period must be a finite number > 0"),
+        ({"substeps": 0}, "substeps"),
+        ({"substeps": 1.5}, "substeps"),
+    ],
+)
+def test_bad_control_periods_and_substeps_are_named(options, says):
+    with pytest.raises(ValueError, match=says):
+        locomotion_task("hopper", **options)
+
+
+def test_substeps_split_the_control_period():
+    task = locomotion_task("half_cheetah", substeps=2)
+    assert task.dt == pytest.approx(0.05) and task.substeps == 2
+    assert task.plant.model.h == pytest.approx(0.025)
