@@ -26,9 +26,10 @@ test: lint
 	$(PY) -m pytest tests --nbmake notebooks -q
 
 # The API reference (docs/api, generated from the docstrings) and docs/*.md, as HTML in
-# docs/_build/html. Warnings are errors (-W), references are checked (-n): see docs/conf.py.
+# docs/_build/html. Warnings are errors (-W), references are checked (-n), and every page is read
+# afresh (-E) so an incremental build cannot hide a warning: see docs/conf.py.
 docs: $(STAMP)
-	$(VENV)/bin/sphinx-build -W --keep-going -b html -n docs docs/_build/html
+	$(VENV)/bin/sphinx-build -E -W --keep-going -b html -n docs docs/_build/html
 
 format: $(STAMP)
 	$(VENV)/bin/ruff format .

@@ -1,7 +1,7 @@
 """Training checkpoints: one pickle file holding a trainer's whole state, written atomically and
 read back with its format name and version checked; and the one loop that runs a resumable
 trainer (``iterate()``, ``save(path)``, ``state.iteration``, ``state.env_steps``, ``state.rows``)
-to a budget with periodic checkpoints (:func:`train_resumable`).
+to a budget with periodic checkpoints (:func:`~drake_abs.policy.checkpoints.train_resumable`).
 
 A checkpoint is for this library's own use (it is not a published format: a policy ships as a
 policy file, :mod:`drake_abs.policy.policy_files`), and like any pickle it should only be loaded

@@ -32,7 +32,7 @@ __all__ = ["FreeBodyCoordinates", "rotation_matrix"]
 
 
 def rotation_matrix(e: np.ndarray) -> np.ndarray:
-    """R (B, 3, 3) of quaternions e (B, 4) = (w, x, y, z) of any nonzero norm (of e / |e|)."""
+    """R (B, 3, 3) of quaternions e (B, 4) = (w, x, y, z) of any nonzero norm (e is normalised)."""
     e = np.asarray(e, dtype=float)
     u = e / np.linalg.norm(e, axis=1, keepdims=True)
     w, x, y, z = u.T
