@@ -97,7 +97,8 @@ class Config:
                           critic_epochs=2, critic_minibatches=2)  # fmt: skip
         ars = ArsConfig(directions=2, top=1, episode_length=20)
         return cls(tasks=("hopper",), methods=("shac_abs", "ars"), seeds=(0,), env_steps=160,
-                   settings=RunSettings(shac=shac, ars=ars), evaluations=3, score_seeds=2,
+                   settings=RunSettings(shac=shac, ars=ars, sb3_envs=2), evaluations=3,
+                   score_seeds=2,
                    episode_steps=20, checkpoint_every=2)  # fmt: skip
 
     def check(self) -> None:

@@ -10,11 +10,14 @@ experiment's settings, passed to :meth:`Method.make_smoothing`.
 
 A method is either a gradient estimator (``estimator`` in :data:`ESTIMATORS`, run by
 :meth:`Method.estimate`) or a trainer of its own (:data:`TRAINERS`: ``"ars"``, ``"mbpo"``,
-``"shac"``, ``"fopg_episode"``: they do not estimate a gradient of the same objective, and the
-experiments call their training loops). ``"shac"`` is short differentiable windows with a
-learned value tail (Xu et al. 2022) and ``"fopg_episode"`` plain FOPG over whole episodes from
-the reset noise, both run by :class:`drake_abs.policy.shac.ShacTrainer`
-(:meth:`drake_abs.policy.shac.ShacConfig.for_method` gives a method's settings).
+``"shac"``, ``"fopg_episode"``, ``"sb3"``: they do not estimate a gradient of the same
+objective, and the experiments call their training loops). ``"shac"`` is short differentiable
+windows with a learned value tail (Xu et al. 2022) and ``"fopg_episode"`` plain FOPG over whole
+episodes from the reset noise, both run by :class:`drake_abs.policy.shac.ShacTrainer`
+(:meth:`drake_abs.policy.shac.ShacConfig.for_method` gives a method's settings). ``"sb3"``
+names the library baselines (``sb3_ppo``, ``sb3_sac``: stable-baselines3's PPO and SAC;
+``sb3_ars``: sb3-contrib's ARS), run by :class:`drake_abs.tasks.sb3_baselines.Sb3Trainer`
+(the ``baselines`` extra).
 
 ``fopg_bs_<mu>`` names FOPG through barrier smoothing at that mu (e.g. ``fopg_bs_1e-2``);
 :func:`method` parses it.
@@ -56,7 +59,7 @@ SMOOTHINGS = {
 #: the gradient estimators a method can name (the trainers are not among them)
 ESTIMATORS = ("first_order", "zeroth_order", "alpha_order", "pipps")
 #: the methods with a training loop of their own
-TRAINERS = ("ars", "mbpo", "shac", "fopg_episode")
+TRAINERS = ("ars", "mbpo", "shac", "fopg_episode", "sb3")
 
 
 def make_smoothing(
@@ -185,6 +188,12 @@ METHODS: dict[str, Method] = {
         Method("fopg_episode_exact", "FOPG (episodes)", "exact", "fopg_episode",
                description="first-order gradient of whole episodes from the reset noise, "
                            "through exact contact"),
+        Method("sb3_ppo", "PPO (SB3)", "exact", "sb3",
+               description="stable-baselines3's PPO with the RL Zoo's settings"),
+        Method("sb3_sac", "SAC (SB3)", "exact", "sb3",
+               description="stable-baselines3's SAC with the RL Zoo's settings"),
+        Method("sb3_ars", "ARS (sb3-contrib)", "exact", "sb3",
+               description="sb3-contrib's ARS with the RL Zoo's settings"),
     )
 }  # fmt: skip
 

@@ -1,22 +1,27 @@
 """Baselines from well-kept libraries, trained on our plant: PPO and SAC of stable-baselines3 and
-ARS of sb3-contrib on a locomotion task's ``gymnasium.Env``
-(:class:`~drake_abs.tasks.gym_env.DrakeAbsEnv`), with the RL Baselines3 Zoo's published
+ARS of sb3-contrib on a locomotion task's environments
+(:class:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv`), with the RL Baselines3 Zoo's published
 hyperparameters, and their final policies written in the published policy-file format
 (:mod:`drake_abs.policy.policy_files`).
 
-The environment: ``DrakeAbsEnv(locomotion_task(name, **env_options), max_episode_steps=1000)``:
-gymnasium v5's reward, observation, termination and reset noise (drawn at every reset), one
-action per control period (gymnasium's, 8 ms Hopper, 50 ms HalfCheetah), episodes truncated
-after 1000 actions. One **environment step** is one control period stepped (one ``env.step``),
-as our own trainers count: the step that ends an episode counts, a reset does not.
+The environments: ``DrakeAbsVecEnv(locomotion_task(name, **env_options), n_envs,
+max_episode_steps=1000)``, what ``n_envs`` independent
+:class:`~drake_abs.tasks.gym_env.DrakeAbsEnv` give, bit for bit: gymnasium v5's reward,
+observation, termination and reset noise (drawn at every reset), one action per control
+period (gymnasium's, 8 ms Hopper, 50 ms HalfCheetah), episodes truncated after 1000 actions.
+One **environment step** is one control period of one environment stepped, as our own
+trainers count: the step that ends an episode counts, a reset does not.
 
-**Several environments at once** (``n_envs`` > 1, PPO and SAC): ``n_envs`` copies of the task
-in one :class:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv`, stepped in one batched call of our
-plant (the same transitions as ``n_envs`` independent ``DrakeAbsEnv``, bit for bit, at a
-fraction of the cost per step), with the hyperparameters adapted so that each update sees the
-same amount of data (:func:`vectorised_hyperparameters`: PPO's rollout keeps its 512 steps,
-``n_steps = 512 / n_envs``; SAC keeps one gradient step per transition). Every environment's
-step counts. sb3-contrib's ARS stays on one environment (it evaluates one candidate at a time).
+**Several environments at once** (``n_envs`` > 1, PPO and SAC): the ``n_envs`` copies are
+stepped in one batched call of our plant (a fraction of the cost per step), with the
+hyperparameters adapted so that each update sees the same amount of data
+(:func:`vectorised_hyperparameters`: PPO's rollout keeps its 512 steps, ``n_steps = 512 /
+n_envs``; SAC keeps one gradient step per transition). Every environment's step counts.
+sb3-contrib's ARS stays on one environment (it evaluates one candidate at a time).
+
+**Resumable** (:class:`Sb3Trainer`): a run advances in chunks and is saved and continued to
+the last bit, so that a sweep of long runs survives a stop; :func:`train_baseline` runs one
+to its budget in one go.
 
 Hyperparameters (:data:`ZOO_SETTINGS`): the RL Baselines3 Zoo's (github.com/DLR-RM/
 rl-baselines3-zoo, ``hyperparams/*.yml``) for the MuJoCo task of the same body:
@@ -70,6 +75,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
 
@@ -78,7 +84,6 @@ import numpy as np
 
 from drake_abs._validation import as_count
 from drake_abs.policy.policy_files import PolicyFile
-from drake_abs.tasks.gym_env import DrakeAbsEnv
 from drake_abs.tasks.locomotion import TASKS, locomotion_task
 
 __all__ = [
@@ -86,7 +91,8 @@ __all__ = [
     "METHOD_KEYS",
     "ZOO_SETTINGS",
     "BaselineRun",
-    "StepLog",
+    "Sb3State",
+    "Sb3Trainer",
     "TrainingLog",
     "ZooSettings",
     "baseline_settings",
@@ -316,7 +322,8 @@ class TrainingLog:
     :meth:`start_clock`), ``episodes`` (training episodes that ended since the previous row,
     in the order they ended, environment by environment within a step), ``return_mean`` and
     ``length_mean`` over those (None when none ended), ``unconverged`` (steps so far whose
-    contact solve did not converge; ``info["converged"]``).
+    contact solve did not converge; ``info["converged"]``). The clock runs only between
+    :meth:`start_clock` and :meth:`stop_clock` (training, not scoring or checkpoints).
     """
 
     def __init__(self, log_every: int, n_envs: int = 1):
@@ -330,16 +337,35 @@ class TrainingLog:
         self._return = np.zeros(self.n_envs)  # of the episodes in progress
         self._length = np.zeros(self.n_envs, dtype=int)
         self._since = 0  # episodes ended before the last row
-        self._start = time.perf_counter()
+        self._elapsed = 0.0  # seconds clocked before the current start
+        self._start: float | None = None  # when the running clock started; None: stopped
 
     def start_clock(self) -> None:
-        """Set the log's time origin to now."""
-        self._start = time.perf_counter()
+        """Run the clock from now on, adding to the seconds clocked so far (nothing if it runs
+        already)."""
+        if self._start is None:
+            self._start = time.perf_counter()
+
+    def stop_clock(self) -> None:
+        """Stop the clock (between a run's chunks of training: scoring, checkpoints)."""
+        if self._start is not None:
+            self._elapsed += time.perf_counter() - self._start
+            self._start = None
 
     @property
     def seconds(self) -> float:
-        """Wall time since :meth:`start_clock` (s)."""
-        return time.perf_counter() - self._start
+        """Wall time clocked while training (s): from :meth:`start_clock`, without the spans
+        between a :meth:`stop_clock` and the next start."""
+        running = 0.0 if self._start is None else time.perf_counter() - self._start
+        return self._elapsed + running
+
+    def __getstate__(self) -> dict:
+        """Picklable with the clock stopped (a checkpoint; the clocked seconds kept)."""
+        state = self.__dict__.copy()
+        if state["_start"] is not None:
+            state["_elapsed"] += time.perf_counter() - state["_start"]
+            state["_start"] = None
+        return state
 
     def new_episodes(self) -> None:
         """Every environment starts a new episode (a reset): the ones in progress are dropped."""
@@ -385,28 +411,6 @@ class TrainingLog:
         """A last row, unless the last step already wrote one."""
         if not self.rows or self.rows[-1]["env_steps"] != self.steps:
             self._row()
-
-
-class StepLog(gymnasium.Wrapper):
-    """A ``gymnasium.Env`` whose steps are recorded in a :class:`TrainingLog` (of one
-    environment; wrap the raw environment, inside any normalisation: returns are the task's)."""
-
-    def __init__(self, env: gymnasium.Env, log: TrainingLog):
-        super().__init__(env)
-        if not isinstance(log, TrainingLog) or log.n_envs != 1:
-            raise ValueError(f"log must be a TrainingLog of n_envs = 1; got {log!r}")
-        self.log = log
-
-    def reset(self, **kwargs):
-        """The wrapped environment's reset; the log starts new episodes."""
-        self.log.new_episodes()
-        return self.env.reset(**kwargs)
-
-    def step(self, action):
-        """The wrapped environment's step, its reward and end recorded in the log."""
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        self.log.record([reward], [terminated or truncated], [info])
-        return obs, reward, terminated, truncated, info
 
 
 def _vec_step_log(venv, log: TrainingLog):
@@ -509,6 +513,293 @@ def _algorithm_class(algorithm: str):
     return {"ppo": PPO, "sac": SAC}[algorithm]
 
 
+@dataclass
+class Sb3State:
+    """Where an :class:`Sb3Trainer` is: ``iteration`` (calls of :meth:`Sb3Trainer.iterate`),
+    ``env_steps`` (environment steps taken, every environment's), ``seconds`` (wall time spent
+    training), ``rows`` (the training log, :class:`TrainingLog`)."""
+
+    iteration: int = 0
+    env_steps: int = 0
+    seconds: float = 0.0
+    rows: list[dict] = field(default_factory=list)
+
+
+class Sb3Trainer:
+    """A stable-baselines3 PPO or SAC, or sb3-contrib ARS, training on a task of our plant in
+    chunks (:meth:`iterate`), saved and continued bit for bit (:meth:`save`, :meth:`load`):
+    what :func:`train_baseline` runs to a budget, and what a resumable experiment checkpoints.
+
+    Args:
+        task_name, algorithm, seed, env_options, algorithm_options, log_every,
+            max_episode_steps, n_envs: as :func:`train_baseline`.
+        chunk: environment steps of one :meth:`iterate` (at least; the library's
+            ``learn(chunk)``: PPO rounds up to whole rollouts of ``n_steps * n_envs``, ARS to
+            whole iterations, SAC to a multiple of ``n_envs``). None: one rollout (PPO), one
+            iteration (ARS), 1000 steps per environment (SAC).
+
+    The environments are one :class:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv` of
+    ``n_envs`` (one batched step of our plant), inside ``VecNormalize`` where the settings
+    normalise. A run trained in chunks takes the steps one ``learn(total)`` takes: the library
+    keeps its step count, its last observation and its buffers between calls, and the
+    hyperparameters must be constants (a schedule, a callable, is refused: it would see each
+    chunk as a whole run).
+
+    A checkpoint (:meth:`save`) holds the model (the library's own ``save``: weights,
+    optimisers, step counts, the last observation), SAC's replay buffer, the normalisation's
+    statistics and running returns, the environments' states and generators
+    (:meth:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv.snapshot`), the log, and the random
+    generators the libraries draw from (python's, numpy's global, torch's, the action
+    space's): a run saved and loaded between two chunks gives the policy of a run never
+    stopped, to the last bit (``tests/tasks/test_sb3_baselines.py``).
+    """
+
+    #: the checkpoint format (:mod:`drake_abs.policy.checkpoints`)
+    FORMAT = "drake-abs sb3 checkpoint"
+    FORMAT_VERSION = 1
+
+    def __init__(
+        self,
+        task_name: Literal["hopper", "half_cheetah", "walker2d", "ant"],
+        algorithm: Literal["ppo", "sac", "ars"],
+        seed: int,
+        *,
+        env_options: Mapping | None = None,
+        algorithm_options: Mapping | None = None,
+        log_every: int = 10_000,
+        max_episode_steps: int = 1000,
+        n_envs: int = 1,
+        chunk: int | None = None,
+    ):
+        _check_names(task_name, algorithm)
+        if task_name not in TASKS:
+            raise ValueError(f"task_name must be one of {sorted(TASKS)}; got {task_name!r}")
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ValueError(f"seed must be a whole number >= 0; got {seed!r}")
+        self.task_name, self.algorithm, self.seed = task_name, algorithm, int(seed)
+        self.n_envs = as_count(n_envs, "n_envs", minimum=1)
+        self.settings = baseline_settings(task_name, algorithm, algorithm_options, self.n_envs)
+        _check_constant(self.settings["hyperparameters"])
+        if chunk is None:
+            chunk = 1000 * self.n_envs if algorithm == "sac" else 1
+        self.chunk = as_count(chunk, "chunk", minimum=1)
+        self.max_episode_steps = max_episode_steps
+        self.log = TrainingLog(log_every, self.n_envs)
+        self.task = locomotion_task(task_name, **dict(env_options or {}))
+        self.model = self._new_model()
+        self.state = Sb3State()
+
+    # ------------------------------------------------------------------------- building
+
+    def _environments(self, vec_normalize=None):
+        """``(raw, env, vec_normalize)``: the task's ``DrakeAbsVecEnv``, what the model steps
+        (the raw one, logged, inside a ``VecNormalize`` where the settings normalise; a given
+        ``vec_normalize``, unpickled, is wrapped around it instead of a new one)."""
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        from drake_abs.tasks.sb3_vec_env import DrakeAbsVecEnv
+
+        raw = DrakeAbsVecEnv(self.task, self.n_envs, max_episode_steps=self.max_episode_steps)
+        env = _vec_step_log(raw, self.log)
+        if vec_normalize is not None:
+            returns = vec_normalize.__dict__.pop("_saved_returns", None)
+            vec_normalize.set_venv(env)
+            if returns is not None:
+                vec_normalize.returns = returns
+            return raw, vec_normalize, vec_normalize
+        if self.settings["normalize"] is None:
+            return raw, env, None
+        kwargs = dict(self.settings["normalize"])
+        hyper = self.settings["hyperparameters"]
+        if self.algorithm != "ars" and "gamma" in hyper:
+            kwargs.setdefault("gamma", hyper["gamma"])  # as the zoo does
+        vec_normalize = VecNormalize(env, **kwargs)
+        return raw, vec_normalize, vec_normalize
+
+    def _new_model(self):
+        self.raw_env, env, self.vec_normalize = self._environments()
+        hyper = dict(self.settings["hyperparameters"])
+        policy = hyper.pop("policy", "MlpPolicy")
+        kwargs = _torch_policy_kwargs(hyper.pop("policy_kwargs", None))
+        if kwargs is not None:
+            hyper["policy_kwargs"] = kwargs
+        with _one_torch_thread():
+            return _algorithm_class(self.algorithm)(
+                policy, env, seed=self.seed, device="cpu", verbose=0, **hyper
+            )
+
+    # ------------------------------------------------------------------------- training
+
+    def iterate(self, steps: int | None = None, *, deadline: float | None = None) -> dict:
+        """Train ``steps`` environment steps more (default ``chunk``; rounded up as ``chunk``
+        is), or until ``time.perf_counter()`` passes ``deadline`` (then the rollout or
+        iteration in progress is counted but not used, and the run cannot be continued
+        exactly: a budget in seconds is for measuring speed). Returns the last log row.
+
+        Raises:
+            FloatingPointError: our plant's state became non-finite (the step count in the
+                notes); the run stops there.
+        """
+        steps = self.chunk if steps is None else as_count(steps, "steps", minimum=1)
+        stopped = []
+
+        def in_time(_locals, _globals) -> bool:
+            if deadline is None or time.perf_counter() < deadline:
+                return True
+            stopped.append(self.log.steps)
+            if self.algorithm == "ars":  # sb3-contrib's ARS ignores a callback's False
+                raise _OutOfTime
+            return False  # PPO and SAC stop here
+
+        self.log.start_clock()
+        try:
+            with _one_torch_thread():
+                self.model.learn(total_timesteps=steps, callback=in_time,
+                                 reset_num_timesteps=False)  # fmt: skip
+        except _OutOfTime:
+            pass
+        except FloatingPointError as err:
+            err.add_note(f"Sb3Trainer: after {self.log.steps} environment steps of "
+                         f"{self.algorithm} on {self.task_name}, seed {self.seed}")  # fmt: skip
+            raise
+        finally:
+            self.log.stop_clock()
+        self.stopped_early = bool(stopped)
+        self.log.close_log()
+        self.state.iteration += 1
+        self.state.env_steps = self.log.steps
+        self.state.seconds = self.log.seconds
+        self.state.rows = self.log.rows
+        return self.log.rows[-1]
+
+    @property
+    def recent_return(self) -> float | None:
+        """Mean return (the task's reward) of the episodes that ended in the last logged span
+        with any (None before the first)."""
+        for row in reversed(self.log.rows):
+            if row["return_mean"] is not None:
+                return row["return_mean"]
+        return None
+
+    def policy_file(self, **metadata) -> PolicyFile:
+        """The current policy as a policy file (:func:`sb3_policy_file`), with metadata
+        ``env_id``, ``method`` (:data:`METHOD_KEYS`), ``seed``, ``training_steps`` and, with
+        ``n_envs`` > 1, ``n_envs``; ``metadata`` adds or replaces keys."""
+        meta = {"env_id": self.task.env_id, "method": METHOD_KEYS[self.algorithm],
+                "seed": self.seed, "training_steps": self.state.env_steps}  # fmt: skip
+        if self.n_envs > 1:
+            meta["n_envs"] = self.n_envs
+        meta = {k: v for k, v in meta.items() if v is not None}
+        return sb3_policy_file(self.model, self.vec_normalize, **(meta | metadata))
+
+    # ------------------------------------------------------------------------- checkpoints
+
+    def save(self, path: str | Path) -> Path:
+        """Write the whole training state to ``path`` (class docstring)."""
+        import io
+        import pickle
+        import random
+
+        import torch
+
+        from drake_abs.policy.checkpoints import write_checkpoint
+
+        if self.raw_env._actions is not None:
+            raise RuntimeError("save between iterations")
+        model = io.BytesIO()
+        self.model.save(model)
+        buffer = None
+        if getattr(self.model, "replay_buffer", None) is not None:
+            buffer = pickle.dumps(self.model.replay_buffer, protocol=pickle.HIGHEST_PROTOCOL)
+        vec_normalize = None
+        if self.vec_normalize is not None:
+            vec_normalize = pickle.dumps(self.vec_normalize, protocol=pickle.HIGHEST_PROTOCOL)
+        payload = {
+            "identity": self._identity(),
+            "model": model.getvalue(),
+            "replay_buffer": buffer,
+            "vec_normalize": vec_normalize,
+            "returns": None if self.vec_normalize is None else self.vec_normalize.returns.copy(),
+            "environments": self.raw_env.snapshot(),
+            "log": pickle.dumps(self.log, protocol=pickle.HIGHEST_PROTOCOL),
+            "state": self.state,
+            "rng": {
+                "python": random.getstate(), "numpy": np.random.get_state(),  # noqa: NPY002 (what sb3 draws from)
+                "torch": torch.get_rng_state(),
+                "action_space": self.model.action_space.np_random.bit_generator.state,
+            },
+        }  # fmt: skip
+        return write_checkpoint(path, payload, kind=self.FORMAT, version=self.FORMAT_VERSION)
+
+    def _identity(self) -> dict:
+        return {"task_name": self.task_name, "algorithm": self.algorithm, "seed": self.seed,
+                "n_envs": self.n_envs, "settings": self.settings}  # fmt: skip
+
+    def load(self, path: str | Path) -> Sb3Trainer:
+        """Continue from the checkpoint at ``path``, written by a trainer built with the same
+        task, algorithm, seed, settings and ``n_envs`` (``ValueError`` otherwise; the task's
+        ``env_options`` are the caller's to match). Returns this trainer."""
+        import io
+        import pickle
+        import random
+
+        import torch
+
+        from drake_abs.policy.checkpoints import read_checkpoint
+
+        data = read_checkpoint(path, kind=self.FORMAT, version=self.FORMAT_VERSION)
+        if data["identity"] != self._identity():
+            raise ValueError(
+                f"path holds a run of {data['identity']}; this trainer is {self._identity()}"
+            )
+        self.log = pickle.loads(data["log"])  # noqa: S301 (the library's own checkpoint)
+        vec_normalize = None
+        if data["vec_normalize"] is not None:
+            vec_normalize = pickle.loads(data["vec_normalize"])  # noqa: S301
+            vec_normalize._saved_returns = data["returns"]
+        self.raw_env, env, self.vec_normalize = self._environments(vec_normalize)
+        with _one_torch_thread():
+            self.model = _algorithm_class(self.algorithm).load(
+                io.BytesIO(data["model"]), env=env, device="cpu", force_reset=False
+            )
+        if data["replay_buffer"] is not None:
+            self.model.replay_buffer = pickle.loads(data["replay_buffer"])  # noqa: S301
+        self.raw_env.restore(data["environments"])  # after the load reseeded it
+        rng = data["rng"]
+        random.setstate(rng["python"])
+        np.random.set_state(rng["numpy"])  # noqa: NPY002 (what sb3 draws from)
+        torch.set_rng_state(rng["torch"])
+        self.model.action_space.np_random.bit_generator.state = rng["action_space"]
+        self.state = data["state"]
+        return self
+
+
+def _check_constant(hyperparameters: Mapping) -> None:
+    """A run trained in chunks needs constant hyperparameters (a schedule would restart)."""
+    for name, value in hyperparameters.items():
+        if callable(value):
+            raise ValueError(
+                f"algorithm_options[{name!r}] must be a constant, not a schedule: a run trained "
+                "in chunks would see each chunk as a whole run"
+            )
+
+
+class _one_torch_thread:
+    """Torch on one thread inside the block (the runs' reproducibility), restored after."""
+
+    def __enter__(self):
+        import torch
+
+        self._threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+
+    def __exit__(self, *exc):
+        import torch
+
+        torch.set_num_threads(self._threads)
+        return False
+
+
 def train_baseline(
     task_name: Literal["hopper", "half_cheetah", "walker2d", "ant"],
     algorithm: Literal["ppo", "sac", "ars"],
@@ -523,7 +814,8 @@ def train_baseline(
     n_envs: int = 1,
 ) -> BaselineRun:
     """Train ``algorithm`` (stable-baselines3's PPO or SAC, sb3-contrib's ARS) on the task
-    ``task_name`` on our plant for ``env_steps`` environment steps (module docstring).
+    ``task_name`` on our plant for ``env_steps`` environment steps (module docstring), in
+    one go (an :class:`Sb3Trainer` run to the budget).
 
     Args:
         task_name: a task of :data:`~drake_abs.tasks.locomotion.TASKS`.
@@ -539,10 +831,9 @@ def train_baseline(
         max_episode_steps: steps after which an episode is truncated (gymnasium's 1000).
         max_seconds: stop after this much wall time (s) if the budget is not spent by then
             (``stopped_early`` in the result); None: no limit.
-        n_envs: environments stepped together. 1 (default): one
-            :class:`~drake_abs.tasks.gym_env.DrakeAbsEnv` in a ``DummyVecEnv``. More: one
+        n_envs: environments stepped together in one
             :class:`~drake_abs.tasks.sb3_vec_env.DrakeAbsVecEnv` (one batched step of our
-            plant for all of them), the hyperparameters adapted
+            plant for all of them); more than 1 adapts the hyperparameters
             (:func:`vectorised_hyperparameters`; PPO and SAC only).
 
     Returns:
@@ -553,80 +844,24 @@ def train_baseline(
         FloatingPointError: our plant's state became non-finite (the step count is in the
             message's notes); training stops there.
     """
-    _check_names(task_name, algorithm)
-    if task_name not in TASKS:
-        raise ValueError(f"task_name must be one of {sorted(TASKS)}; got {task_name!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"seed must be a whole number >= 0; got {seed!r}")
-    seed = int(seed)
     env_steps = as_count(env_steps, "env_steps", minimum=1)
     if max_seconds is not None and not (
         isinstance(max_seconds, int | float) and np.isfinite(max_seconds) and max_seconds > 0
     ):
         raise ValueError(f"max_seconds must be a number > 0 (s) or None; got {max_seconds!r}")
-    n_envs = as_count(n_envs, "n_envs", minimum=1)
-    settings = baseline_settings(task_name, algorithm, algorithm_options, n_envs)
-    log = TrainingLog(log_every, n_envs)
-
-    import torch
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-
-    task = locomotion_task(task_name, **dict(env_options or {}))
-    if n_envs == 1:
-        env = StepLog(DrakeAbsEnv(task, max_episode_steps=max_episode_steps), log)
-        venv = DummyVecEnv([lambda: env])
-    else:
-        from drake_abs.tasks.sb3_vec_env import DrakeAbsVecEnv
-
-        venv = _vec_step_log(DrakeAbsVecEnv(task, n_envs, max_episode_steps=max_episode_steps),
-                             log)  # fmt: skip
-    vec_normalize = None
-    if settings["normalize"] is not None:
-        kwargs = dict(settings["normalize"])
-        if algorithm != "ars" and "gamma" in settings["hyperparameters"]:
-            kwargs.setdefault("gamma", settings["hyperparameters"]["gamma"])  # as the zoo does
-        venv = vec_normalize = VecNormalize(venv, **kwargs)
-    hyper = dict(settings["hyperparameters"])
-    policy = hyper.pop("policy", "MlpPolicy")
-    hyper["policy_kwargs"] = _torch_policy_kwargs(hyper.get("policy_kwargs"))
-    if hyper["policy_kwargs"] is None:
-        hyper.pop("policy_kwargs")
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        model = _algorithm_class(algorithm)(
-            policy, venv, seed=seed, device="cpu", verbose=0, **hyper
-        )
-        log.start_clock()
-
-        stopped = []
-
-        def in_time(_locals, _globals) -> bool:
-            if max_seconds is None or log.seconds < max_seconds:
-                return True
-            stopped.append(log.steps)
-            if algorithm == "ars":  # sb3-contrib's ARS ignores a callback's False
-                raise _OutOfTime
-            return False  # PPO and SAC stop here
-
-        try:
-            model.learn(total_timesteps=env_steps, callback=in_time)
-        except _OutOfTime:
-            pass
-        except FloatingPointError as err:
-            err.add_note(f"train_baseline: after {log.steps} environment steps of "
-                         f"{algorithm} on {task_name}, seed {seed}")  # fmt: skip
-            raise
-        log.close_log()
-        seconds = log.seconds
-    finally:
-        torch.set_num_threads(threads)
+    trainer = Sb3Trainer(
+        task_name, algorithm, seed, env_options=env_options,
+        algorithm_options=algorithm_options, log_every=log_every,
+        max_episode_steps=max_episode_steps, n_envs=n_envs, chunk=env_steps,
+    )  # fmt: skip
+    deadline = None if max_seconds is None else time.perf_counter() + max_seconds
+    trainer.iterate(env_steps, deadline=deadline)
     return BaselineRun(
-        task_name=task_name, algorithm=algorithm, seed=seed, env_id=task.env_id,
-        env_steps=log.steps, seconds=seconds, rows=log.rows, unconverged=log.unconverged,
-        settings=settings, model=model, vec_normalize=vec_normalize,
-        stopped_early=bool(stopped), n_envs=n_envs,
+        task_name=task_name, algorithm=algorithm, seed=trainer.seed, env_id=trainer.task.env_id,
+        env_steps=trainer.state.env_steps, seconds=trainer.state.seconds,
+        rows=trainer.state.rows, unconverged=trainer.log.unconverged,
+        settings=trainer.settings, model=trainer.model, vec_normalize=trainer.vec_normalize,
+        stopped_early=trainer.stopped_early, n_envs=trainer.n_envs,
     )  # fmt: skip
 
 

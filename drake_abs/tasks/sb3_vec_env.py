@@ -43,7 +43,8 @@ Needs stable-baselines3 (the ``baselines`` extra) and gymnasium; only the baseli
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import copy
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -180,6 +181,34 @@ class DrakeAbsVecEnv(VecEnv):
             for m, info in zip(done, self._reset_infos(self._x[done]), strict=True):
                 self.reset_infos[m] = info
         return obs, steps.reward.copy(), dones, infos
+
+    # --------------------------------------------------------------------------- snapshots
+
+    #: what :meth:`snapshot` holds: every attribute that changes as the environments step
+    _SNAPSHOT = ("_x", "_steps", "_rngs", "_seeds", "_options", "reset_infos")
+
+    def snapshot(self) -> dict[str, Any]:
+        """The environments' whole changing state (states, episode steps, generators, pending
+        seeds), as plain picklable data: :meth:`restore` on an environment of the same task and
+        ``n_envs`` continues exactly where this one is (a checkpoint of a training run)."""
+        if self._actions is not None:
+            raise RuntimeError("snapshot between steps, not between step_async and step_wait")
+        return {"n_envs": self.num_envs, **{k: copy.deepcopy(getattr(self, k, None))
+                                            for k in self._SNAPSHOT}}  # fmt: skip
+
+    def restore(self, snapshot: Mapping[str, Any]) -> None:
+        """Continue from a :meth:`snapshot` (of an environment of the same task and
+        ``n_envs``; ``ValueError`` otherwise)."""
+        if snapshot.get("n_envs") != self.num_envs:
+            raise ValueError(
+                f"snapshot is of {snapshot.get('n_envs')} environments; this has {self.num_envs}"
+            )
+        if np.shape(snapshot["_x"]) != self._x.shape:
+            raise ValueError(f"snapshot's states have shape {np.shape(snapshot['_x'])}; this "
+                             f"task's are {self._x.shape}")  # fmt: skip
+        for key in self._SNAPSHOT:
+            setattr(self, key, copy.deepcopy(snapshot[key]))
+        self._actions = None
 
     def close(self) -> None:
         """Nothing to release."""

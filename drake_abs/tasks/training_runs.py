@@ -28,6 +28,10 @@ The trainers, by the registry's ``estimator``:
   :meth:`~drake_abs.policy.ars_trainer.ArsConfig.published`, unless ``settings.ars`` gives
   others), on the exact plant (a derivative-free method needs no smoothing) with gymnasium's
   reward.
+- ``"sb3"``: :class:`~drake_abs.tasks.sb3_baselines.Sb3Trainer`, the library baselines
+  (stable-baselines3's PPO and SAC, sb3-contrib's ARS, with the RL Zoo's settings) on the exact
+  plant with gymnasium's reward, ``sb3_envs`` environments stepped together (ARS: one), in
+  chunks of ``sb3_chunk`` environment steps. Needs the ``baselines`` extra.
 
 :class:`RunSettings` holds what defines a run besides its task, method and seed.
 """
@@ -55,6 +59,7 @@ from drake_abs.tasks.published_policies import task_policy_file
 __all__ = [
     "ArsRun",
     "RunSettings",
+    "Sb3Run",
     "ShacRun",
     "TrainerRun",
     "TrainingRun",
@@ -111,6 +116,12 @@ class RunSettings:
         control_period: seconds per action; None: gymnasium's.
         substeps: plant steps per action; None: the task's default.
         ars: ARS's settings; None: the published ones of the task.
+        sb3_envs: environments the library baselines PPO and SAC step together (their
+            hyperparameters adapted to keep the data per update,
+            :func:`~drake_abs.tasks.sb3_baselines.vectorised_hyperparameters`); sb3-contrib's
+            ARS always steps one.
+        sb3_chunk: environment steps of one iteration of a library baseline (rounded up to
+            whole rollouts or iterations).
     """
 
     policy: Literal["linear", "mlp"] = "linear"
@@ -121,6 +132,8 @@ class RunSettings:
     control_period: float | None = None
     substeps: int | None = None
     ars: ArsConfig | None = None
+    sb3_envs: int = 16
+    sb3_chunk: int = 10_000
 
     def __post_init__(self):
         if self.policy not in ("linear", "mlp"):
@@ -129,6 +142,10 @@ class RunSettings:
             raise ValueError(f"ars must be an ArsConfig or None; got {type(self.ars).__name__}")
         if not isinstance(self.shac, ShacConfig):
             raise ValueError(f"shac must be a ShacConfig; got {type(self.shac).__name__}")
+        for name in ("sb3_envs", "sb3_chunk"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a whole number >= 1; got {value!r}")
         if len(self.contact_aware) != 2 or len(self.survive_width) != 2:
             raise ValueError(
                 "contact_aware must be (mu_max, length) and survive_width (height, pitch); got "
@@ -137,14 +154,18 @@ class RunSettings:
 
     def for_method(self, method: str) -> dict:
         """The settings a run of ``method`` reads, as a dict (what defines its numbers beside the
-        task, method and seed): ARS reads ``ars`` and the control period; the SHAC trainer
-        everything else."""
+        task, method and seed): ARS reads ``ars`` and the control period; a library baseline
+        ``sb3_envs``, ``sb3_chunk`` and the control period; the SHAC trainer everything
+        else."""
         m = registry_method(method)
         values = asdict(self)
         plant = {"control_period": self.control_period, "substeps": self.substeps}
         if m.estimator == "ars":
             return plant | {"ars": values["ars"]}
-        return {key: v for key, v in values.items() if key != "ars"}
+        if m.estimator == "sb3":
+            return plant | {"sb3_envs": self.sb3_envs, "sb3_chunk": self.sb3_chunk}
+        return {key: v for key, v in values.items()
+                if key not in ("ars", "sb3_envs", "sb3_chunk")}  # fmt: skip
 
 
 def training_task(task_name: str, method: str, settings: RunSettings) -> LocomotionTask:
@@ -270,6 +291,58 @@ class ArsRun(TrainerRun):
         return self
 
 
+class Sb3Run:
+    """A library baseline's run (``sb3`` methods:
+    :class:`~drake_abs.tasks.sb3_baselines.Sb3Trainer`) as a :class:`TrainingRun`, on the
+    exact plant with gymnasium's reward."""
+
+    def __init__(self, task_name: str, method: str, seed: int, settings: RunSettings):
+        if registry_method(method).estimator != "sb3":
+            raise ValueError(f"method must be a library baseline (sb3_*); got {method!r}")
+        from drake_abs.tasks.sb3_baselines import METHOD_KEYS, Sb3Trainer
+
+        algorithm = {key: algo for algo, key in METHOD_KEYS.items()}[method]
+        self.task_name, self.method, self.seed, self.settings = task_name, method, seed, settings
+        env_options = {"control_period": settings.control_period, "substeps": settings.substeps}
+        self.trainer = Sb3Trainer(
+            task_name, algorithm, seed, env_options=env_options,
+            n_envs=1 if algorithm == "ars" else settings.sb3_envs, chunk=settings.sb3_chunk,
+        )  # fmt: skip
+        self.task = self.trainer.task
+
+    @property
+    def env_steps(self) -> int:
+        return int(self.trainer.state.env_steps)
+
+    @property
+    def seconds(self) -> float:
+        return float(self.trainer.state.seconds)
+
+    @property
+    def rows(self) -> list[dict]:
+        """The trainer's log (:class:`~drake_abs.tasks.sb3_baselines.TrainingLog` rows)."""
+        return self.trainer.state.rows
+
+    @property
+    def recent_return(self) -> float | None:
+        """Mean return (gymnasium's reward) of the episodes that ended lately."""
+        return self.trainer.recent_return
+
+    def iterate(self) -> dict:
+        return self.trainer.iterate()
+
+    def save(self, path: str | Path) -> None:
+        self.trainer.save(path)
+
+    def load(self, path: str | Path) -> Sb3Run:
+        """This run continued from the checkpoint at ``path``."""
+        self.trainer.load(path)
+        return self
+
+    def policy_file(self, **metadata) -> PolicyFile:
+        return self.trainer.policy_file(**({"method": self.method} | metadata))
+
+
 def _shac_fields(settings: RunSettings) -> dict:
     """The ShacConfig fields of ``settings.shac``, with the run's policy kind."""
     values = asdict(replace(settings.shac, policy=settings.policy))
@@ -283,8 +356,10 @@ def start_run(task_name: str, method: str, seed: int, settings: RunSettings) -> 
         return ShacRun(task_name, method, seed, settings)
     if m.estimator == "ars":
         return ArsRun(task_name, method, seed, settings)
+    if m.estimator == "sb3":
+        return Sb3Run(task_name, method, seed, settings)
     raise ValueError(
-        f"method must be one this module trains (estimators {SHAC_TRAINERS + ('ars',)}); "
+        f"method must be one this module trains (estimators {SHAC_TRAINERS + ('ars', 'sb3')}); "
         f"{method!r} is {m.estimator!r}"
     )
 

@@ -71,8 +71,10 @@ def test_a_finished_run_is_reused_and_a_changed_one_restarts(done, monkeypatch):
     assert len(calls) == 2  # another budget: new runs (both methods)
 
 
-@pytest.mark.parametrize("method", ["shac_abs", "ars"])
+@pytest.mark.parametrize("method", ["shac_abs", "ars", "sb3_ppo"])
 def test_a_stopped_run_continues_to_the_uninterrupted_numbers(tmp_path, method):
+    if method.startswith("sb3_"):  # the library baselines: the `baselines` extra
+        pytest.importorskip("stable_baselines3")
     cfg = g.Config.test_size()
     whole = g.train_one(cfg, "hopper", method, 0, tmp_path / "whole", None)
     folder = tmp_path / "parts"
@@ -101,3 +103,10 @@ def test_a_run_is_defined_by_the_settings_its_trainer_reads():
         other, "hopper", "shac_abs", 0
     )
     assert g.run_identity(cfg, "hopper", "ars", 0) != g.run_identity(cfg, "hopper", "ars", 1)
+    more = replace(cfg, settings=replace(cfg.settings, sb3_envs=4))
+    assert g.run_identity(cfg, "hopper", "shac_abs", 0) == g.run_identity(
+        more, "hopper", "shac_abs", 0
+    )
+    assert g.run_identity(cfg, "hopper", "sb3_ppo", 0) != g.run_identity(
+        more, "hopper", "sb3_ppo", 0
+    )

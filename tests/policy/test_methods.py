@@ -18,7 +18,7 @@ def test_every_method_names_a_design_and_a_unique_label():
     assert all(m.smoothing in SMOOTHINGS for m in METHODS.values())
     trainers = {m.name for m in METHODS.values() if not m.estimates_gradient}
     assert trainers == {"ars", "mbpo", "shac_abs", "shac_exact", "fopg_episode_abs",
-                        "fopg_episode_exact"}  # fmt: skip
+                        "fopg_episode_exact", "sb3_ppo", "sb3_sac", "sb3_ars"}  # fmt: skip
 
 
 def test_smoothing_policies_of_each_design():

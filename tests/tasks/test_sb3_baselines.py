@@ -325,3 +325,63 @@ def test_a_tiny_run_on_several_environments(algo):
                            log_every=LOG_EVERY, n_envs=2)  # fmt: skip
     for key, value in run.policy_file().arrays().items():
         np.testing.assert_array_equal(value, again.policy_file().arrays()[key], err_msg=key)
+
+
+# -------------------------------------------------------------------------------- resumable runs
+
+
+def _trainer(algo, seed=5, algorithm_options=None, **options):
+    from drake_abs.tasks.sb3_baselines import Sb3Trainer
+
+    chunk = {"ppo": None, "sac": 60, "ars": None}[algo]
+    return Sb3Trainer("hopper", algo, seed, algorithm_options=algorithm_options or TINY[algo],
+                      log_every=LOG_EVERY, chunk=chunk, **options)  # fmt: skip
+
+
+@pytest.mark.parametrize(("algo", "n_envs"), [("ppo", 1), ("ppo", 2), ("sac", 2), ("ars", 1)])
+def test_a_run_saved_and_loaded_between_chunks_is_the_run_never_stopped(algo, n_envs, tmp_path):
+    """Three chunks in one go against one chunk, a checkpoint, a new trainer loaded from it, two
+    chunks: the same policy, normalisation, log and step counts, to the last bit. SAC's chunks
+    of 60 steps cross its first update (after 100 random steps); the checkpoint falls inside an
+    episode for PPO and SAC (the environments' states and generators carry over)."""
+    _libraries()
+    whole = _trainer(algo, n_envs=n_envs)
+    for _ in range(3):
+        whole.iterate()
+    part = _trainer(algo, n_envs=n_envs)
+    part.iterate()
+    if algo != "ars":  # ARS's iterations end with their episodes
+        assert (part.raw_env.episode_steps > 0).any()  # mid-episode
+    part.save(tmp_path / "run.pkl")
+    other = _trainer(algo, n_envs=n_envs)  # another object, drawing nothing yet
+    resumed = other.load(tmp_path / "run.pkl")
+    assert resumed.state.iteration == 1 and resumed.state.env_steps == part.state.env_steps
+    for _ in range(2):
+        resumed.iterate()
+    assert resumed.state.env_steps == whole.state.env_steps
+    assert resumed.model.num_timesteps == whole.model.num_timesteps
+    a, b = whole.policy_file().arrays(), resumed.policy_file().arrays()
+    assert a.keys() == b.keys()
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=f"{algo}: {key}")
+    if whole.vec_normalize is not None:
+        np.testing.assert_array_equal(whole.vec_normalize.returns, resumed.vec_normalize.returns)
+    np.testing.assert_array_equal(whole.raw_env.states, resumed.raw_env.states)
+    keep = ("env_steps", "episodes", "return_mean", "length_mean", "unconverged")
+    assert [{k: r[k] for k in keep} for r in whole.state.rows] == [
+        {k: r[k] for k in keep} for r in resumed.state.rows]  # fmt: skip
+    assert resumed.state.seconds > part.state.seconds > 0
+
+
+def test_a_checkpoint_of_another_run_or_a_schedule_is_refused(tmp_path):
+    _libraries()
+    run = _trainer("ppo")
+    run.iterate()
+    run.save(tmp_path / "run.pkl")
+    other = _trainer("ppo", seed=6)
+    with pytest.raises(ValueError, match="path holds a run of"):
+        other.load(tmp_path / "run.pkl")
+    with pytest.raises(ValueError, match="must be a 'drake-abs sb3 checkpoint' file"):
+        other.load(tmp_path / "missing.pkl")
+    with pytest.raises(ValueError, match=r"algorithm_options\['learning_rate'\] must be a const"):
+        _trainer("ppo", algorithm_options={"learning_rate": lambda p: 1e-4 * p})

@@ -201,3 +201,23 @@ def test_the_library_trains_the_same_policy_on_both(algo, hopper):
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(x, y)
     assert models[0].num_timesteps == models[1].num_timesteps == 128
+
+
+def test_a_snapshot_restored_continues_the_same_episodes(hopper):
+    """Two environments stepped, snapshot, stepped on; another restored from the snapshot and
+    given the same actions (crossing a reset) gives the same observations, rewards and dones."""
+    rng = np.random.default_rng(2)
+    a = DrakeAbsVecEnv(hopper, 2, max_episode_steps=5, seed=7)
+    a.reset()
+    for _ in range(3):
+        a.step(rng.uniform(-1, 1, (2, hopper.nu)))
+    snap = a.snapshot()
+    b = DrakeAbsVecEnv(hopper, 2, max_episode_steps=5, seed=99)
+    b.reset()
+    b.restore(snap)
+    for _ in range(4):  # the episodes end (truncated) and new ones are drawn
+        u = rng.uniform(-1, 1, (2, hopper.nu))
+        for x, y in zip(a.step(u)[:3], b.step(u)[:3], strict=True):
+            np.testing.assert_array_equal(x, y)
+    with pytest.raises(ValueError, match="snapshot is of 2 environments; this has 3"):
+        DrakeAbsVecEnv(hopper, 3).restore(snap)
