@@ -22,6 +22,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
+from drake_abs._validation import as_count
+
+#: A fit's ``status`` (:attr:`FitResult.status`): ``"converged"``, the optimiser's own stopping
+#: test was met at a finite loss; ``"iteration_limit"``, it ran all its iterations without
+#: meeting it (random search has no stopping test and always ends so); ``"stopped"``, the
+#: optimiser gave up for another reason (e.g. no descent along its line search: see
+#: ``message``); ``"no_finite_loss"``, no evaluation gave a finite loss, so nothing was fitted.
+STATUSES = ("converged", "iteration_limit", "stopped", "no_finite_loss")
+
 
 @dataclass(frozen=True)
 class FitResult:
@@ -38,6 +47,9 @@ class FitResult:
         message: the optimiser's own status (gradient) or a summary (random search).
         thetas: (iterations + 1, P) the best parameters after each iteration.
         start_loss: the loss at theta0.
+        status: one of :data:`STATUSES`; ``"converged"`` only when the optimiser's stopping
+            test was met at a finite loss (a fit whose losses were all NaN or inf says
+            ``"no_finite_loss"``, whatever the optimiser's ``message`` says).
     """
 
     theta: np.ndarray
@@ -50,18 +62,53 @@ class FitResult:
     message: str = ""
     thetas: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     start_loss: float = float("nan")
+    status: str = "iteration_limit"
+
+    @property
+    def converged(self) -> bool:
+        """Whether the optimiser's stopping test was met at a finite loss."""
+        return self.status == "converged"
+
+
+def _bound(value, name: str, P: int, fill: float) -> np.ndarray:
+    """A lower or upper bound: None (``fill``, no bound), a number for every parameter, or one
+    number per parameter (P,); ``ValueError`` naming ``name`` otherwise."""
+    if value is None:
+        return np.full(P, fill)
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(
+            f"{name} must be None, a number or ({P},) numbers (one per parameter); got {value!r}"
+        )
+    arr = arr.astype(float)
+    if arr.shape in ((), (1,)):
+        arr = np.full(P, float(arr.reshape(-1)[0]))
+    if arr.shape != (P,) or np.any(np.isnan(arr)):
+        raise ValueError(
+            f"{name} must be None, a number or ({P},) numbers (one per parameter, not NaN); got "
+            f"shape {arr.shape}"
+        )
+    return arr
 
 
 def _setup(theta0, scale, lower, upper):
-    theta0 = np.asarray(theta0, dtype=float).reshape(-1)
+    raw = np.asarray(theta0)
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"theta0 must be a vector of real numbers; got dtype {raw.dtype}")
+    theta0 = raw.astype(float).reshape(-1)
     P = theta0.size
     if P == 0 or not np.all(np.isfinite(theta0)):
         raise ValueError(f"theta0 must be a non-empty vector of finite numbers; got {theta0}")
-    scale = np.broadcast_to(np.asarray(scale, dtype=float), (P,)).copy()
+    scale_raw = np.asarray(scale)
+    if scale_raw.dtype.kind not in "iuf" or scale_raw.shape not in ((), (1,), (P,)):
+        raise ValueError(
+            f"scale must be a number or ({P},) numbers (one per parameter), each > 0; got {scale!r}"
+        )
+    scale = np.broadcast_to(scale_raw.astype(float), (P,)).copy()
     if not np.all(np.isfinite(scale) & (scale > 0)):
         raise ValueError(f"scale must be > 0 and finite, one per parameter ({P}); got {scale}")
-    lo = np.full(P, -np.inf) if lower is None else np.broadcast_to(np.asarray(lower, float), (P,))
-    hi = np.full(P, np.inf) if upper is None else np.broadcast_to(np.asarray(upper, float), (P,))
+    lo = _bound(lower, "lower", P, -np.inf)
+    hi = _bound(upper, "upper", P, np.inf)
     slack = 1e-9 * (1.0 + np.abs(theta0))  # a bound reached by a previous fit, to rounding
     if np.any(lo > hi) or np.any(theta0 < lo - slack) or np.any(theta0 > hi + slack):
         raise ValueError(f"need lower <= theta0 <= upper; got {lo}, {theta0}, {hi}")
@@ -92,13 +139,14 @@ def fit_random_search(
     Seeded; returns the best parameters evaluated. Uses ``1 + iterations (2 directions + 1)``
     evaluations."""
     theta0, scale, lo, hi = _setup(theta0, scale, lower, upper)
-    if iterations < 1 or directions < 1:
-        raise ValueError(f"iterations and directions must be >= 1; got {iterations}, {directions}")
-    top = directions if top is None else int(top)
+    iterations = as_count(iterations, "iterations", minimum=1)
+    directions = as_count(directions, "directions", minimum=1)
+    top = directions if top is None else as_count(top, "top", minimum=1)
     if not 1 <= top <= directions:
         raise ValueError(f"top must be in [1, directions={directions}]; got {top}")
-    if not (step_size > 0 and noise > 0):
-        raise ValueError(f"step_size and noise must be > 0; got {step_size}, {noise}")
+    for name, value in (("step_size", step_size), ("noise", noise)):
+        if not _positive(value):
+            raise ValueError(f"{name} must be a finite number > 0; got {value!r}")
     rng = np.random.default_rng(seed)
     start = time.perf_counter()
     evals = unconverged = 0
@@ -136,7 +184,23 @@ def fit_random_search(
         best_theta, best, "random_search", evals, np.array(history), unconverged,
         time.perf_counter() - start, f"{iterations} iterations x {directions} directions",
         np.array(thetas), history[0][1],
+        "iteration_limit" if np.isfinite(best) else "no_finite_loss",
     )  # fmt: skip
+
+
+def _positive(value) -> bool:
+    """Whether ``value`` is a real number (not a bool) that is finite and > 0."""
+    return (isinstance(value, int | float | np.integer | np.floating)
+            and not isinstance(value, bool) and bool(np.isfinite(value)) and value > 0)  # fmt: skip
+
+
+def _status(res, best: float) -> str:
+    """The :data:`STATUSES` entry of an L-BFGS-B result ``res`` whose best loss is ``best``."""
+    if not np.isfinite(best):
+        return "no_finite_loss"
+    if res.status == 0:
+        return "converged"
+    return "iteration_limit" if res.status == 1 else "stopped"
 
 
 def fit_gradient(
@@ -150,8 +214,13 @@ def fit_gradient(
     tol: float = 1e-12,
 ) -> FitResult:
     """Gradient descent on a loss with its gradient: scipy's L-BFGS-B in scaled coordinates,
-    with the bounds ``[lower, upper]``, at most ``iterations`` iterations."""
+    with the bounds ``[lower, upper]`` (None, a number, or one per parameter), at most
+    ``iterations`` iterations (a whole number >= 1); ``tol`` > 0 is L-BFGS-B's ``ftol`` and
+    ``gtol``. The result's ``status`` (:data:`STATUSES`) says whether it converged."""
     theta0, scale, lo, hi = _setup(theta0, scale, lower, upper)
+    iterations = as_count(iterations, "iterations", minimum=1)
+    if not _positive(tol):
+        raise ValueError(f"tol must be a finite number > 0; got {tol!r}")
     start = time.perf_counter()
     evals = unconverged = 0
     best = [np.inf, theta0]
@@ -187,4 +256,5 @@ def fit_gradient(
     return FitResult(
         np.asarray(best[1], float), float(best[0]), "gradient", evals, np.array(history),
         unconverged, time.perf_counter() - start, str(res.message), np.array(thetas), first[0],
+        _status(res, best[0]),
     )  # fmt: skip

@@ -75,10 +75,21 @@ class LossValue:
 def _data(stepper, x, u, x_next) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     nq, nv, nu, _ = stepper.sizes
     nx = nq + nv
-    x, u, x_next = (np.asarray(a, dtype=float) for a in (x, u, x_next))
+    arrays = []
+    for name, a in (("x", x), ("u", u), ("x_next", x_next)):
+        raw = np.asarray(a)
+        if raw.dtype.kind not in "iuf":
+            raise ValueError(f"{name} must be an array of real numbers; got dtype {raw.dtype}")
+        arrays.append(raw.astype(float))
+    x, u, x_next = arrays
     if x.ndim != 2 or x.shape[1] != nx:
         raise ValueError(f"x must have shape (N, nq + nv) = (N, {nx}); got {x.shape}")
     N = x.shape[0]
+    if N == 0:
+        raise ValueError(
+            f"x must hold at least one transition (shape (N, {nx}) with N >= 1); got no rows: "
+            "a loss over no data is undefined"
+        )
     if x_next.shape != x.shape:
         raise ValueError(f"x_next must have the shape of x, (N, {nx}) = {x.shape}; got "
                          f"{x_next.shape}")  # fmt: skip
@@ -102,12 +113,15 @@ def _weights(weights, nx: int) -> np.ndarray:
 def _columns(all_names: Sequence[str], names: Sequence[str] | None) -> tuple[list, tuple]:
     """The stepper columns of each learned parameter: a name, or a pattern with ``*`` (any
     text) that ties every matching column to one value (``"friction[*]"``: one coefficient
-    for all contacts)."""
+    for all contacts). A column may belong to one learned parameter only: a name given twice,
+    or two patterns matching one column, is a ``ValueError`` naming both (the column would
+    take the last one's value, and the first one's gradient would be wrong)."""
     all_names = tuple(all_names)
     if names is None:
         return [[i] for i in range(len(all_names))], all_names
     if isinstance(names, str):
         raise ValueError(f"names must be a sequence of parameter names; got the string {names!r}")
+    names = list(names)
     groups = []
     for name in names:
         pattern = re.compile(".*".join(re.escape(part) for part in str(name).split("*")))
@@ -117,6 +131,14 @@ def _columns(all_names: Sequence[str], names: Sequence[str] | None) -> tuple[lis
                 f"names must be among the stepper's parameter_names (or patterns with * "
                 f"matching some); {name!r} matches none (known: {list(all_names)})"
             )
+        for earlier, taken in zip(names, groups, strict=False):
+            shared = sorted(set(cols) & set(taken))
+            if shared:
+                raise ValueError(
+                    f"names must name each parameter once; {name!r} and {earlier!r} both set "
+                    f"{all_names[shared[0]]!r}"
+                    + (" (the same name given twice)" if str(name) == str(earlier) else "")
+                )
         groups.append(cols)
     return groups, tuple(str(n) for n in names)
 

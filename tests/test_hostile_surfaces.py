@@ -1,0 +1,280 @@
+"""Hostile input on the surfaces above the solver: the gradient estimators, the learning fits,
+the Ray runner, sweeps, saved policies and policy files, the locomotion tasks and the gymnasium
+environment, and the command line.
+
+The promise checked here is the solver's: bad input is refused before any work starts, with a
+ValueError (TypeError where the type is wrong) that names the argument and the form it expects;
+nothing is returned as a silent wrong answer (a fit that did not run never says it converged, a
+state inside the ground is never stepped as if it were free). The estimators are also checked
+number for number against their formulas at small M, worked out by hand here, so that a defect
+that only shifts an estimate by a constant factor (a leave-one-out baseline that includes its
+own sample) cannot hide behind a statistical test.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from drake_abs import Fixed, point_mass_lcs
+from drake_abs.contact.lcs import LcsStepper
+from drake_abs.learning.fitting import STATUSES, fit_gradient, fit_random_search
+from drake_abs.learning.scene_losses import LossValue
+from drake_abs.policy.estimators import (
+    PolicyObjective,
+    alpha_order,
+    first_order,
+    zeroth_order,
+)
+from drake_abs.policy.policies import LinearPolicy
+from drake_abs.policy.rewards import QuadraticReward
+from drake_abs.policy.rollouts import RolloutJob, RolloutStats, noise_key, rollout_stats
+
+NX, NU = 4, 2  # the 2-D point mass: x = (p_x, p_z, v_x, v_z), u = force
+
+
+def point_mass_objective(horizon: int = 6, sigma: float = 0.3) -> PolicyObjective:
+    """A 2-D ball thrown at the ground (it bounces within the horizon), a linear policy."""
+    lcs = point_mass_lcs(2, time_step=0.02)
+    reward = QuadraticReward(
+        Q=np.diag([0.0, 1.0, 0.0, 0.01]), R=0.01 * np.eye(NU),
+        x_goal=np.array([1.0, 0.2, 0.0, 0.0]), Q_final=np.diag([10.0, 1.0, 0.0, 0.0]),
+    )  # fmt: skip
+    return PolicyObjective(
+        LcsStepper(lcs, Fixed(1e-3), "frozen"), LinearPolicy(NX, NU), reward,
+        np.array([0.0, 0.05, 1.0, -1.0]), horizon, sigma,
+    )  # fmt: skip
+
+
+# ====================================================================== estimators, small M
+
+
+class FixedRunner:
+    """A runner that returns given per-rollout numbers (returns R, gradients G, scores S, and
+    which rollouts are usable) instead of running anything: the estimators' reductions are then
+    checked exactly against the formulas."""
+
+    def __init__(self, R, G, S, used=None):
+        self.R, self.G, self.S = (np.asarray(a, dtype=float) for a in (R, G, S))
+        self.used = np.ones(self.R.size, bool) if used is None else np.asarray(used, bool)
+
+    def run(self, objective, jobs, *, gradient, score):
+        (job,) = jobs
+        assert job.size == self.R.size
+        return [
+            RolloutStats(
+                returns=self.R.copy(), used=self.used.copy(),
+                unconverged=np.zeros(self.R.size, dtype=int), horizon=objective.horizon,
+                grad=self.G.copy() if gradient else None, score=self.S.copy() if score else None,
+                env_steps=np.full(self.R.size, objective.horizon),
+            )
+        ]  # fmt: skip
+
+
+def _numbers(M: int, P: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fixed, distinct per-rollout returns (M,), gradients (M, P) and scores (M, P)."""
+    R = np.array([1.0, 3.0, -2.0, 0.5, 4.0])[:M]
+    G = np.arange(M * P, dtype=float).reshape(M, P) / 7.0 - 1.0
+    S = np.cos(np.arange(M * P, dtype=float)).reshape(M, P)
+    return R, G, S
+
+
+def test_zeroth_order_at_two_samples_is_the_leave_one_out_formula():
+    """M = 2: g = 1/2 [(R_1 - R_2) s_1 + (R_2 - R_1) s_2]. A baseline that included the sample
+    itself (the mean of both) would give exactly half of this."""
+    obj = point_mass_objective()
+    P = obj.policy.n_params
+    R, _, S = _numbers(2, P)
+    by_hand = 0.5 * ((R[0] - R[1]) * S[0] + (R[1] - R[0]) * S[1])
+    est = zeroth_order(obj, np.zeros(P), np.random.default_rng(0), 2,
+                       runner=FixedRunner(R, np.zeros((2, P)), S))  # fmt: skip
+    np.testing.assert_allclose(est.grad, by_hand, rtol=1e-14, atol=1e-15)
+    assert not np.allclose(est.grad, by_hand / 2)
+    assert est.value == pytest.approx(R.mean()) and est.rollouts == 2
+
+
+def test_zeroth_order_at_three_samples_and_with_a_dropped_rollout():
+    """M = 3: b_m is the mean of the other two returns. With a fourth rollout dropped (an
+    unconverged step), the baseline and the mean run over the three usable ones only."""
+    obj = point_mass_objective()
+    P = obj.policy.n_params
+    R, _, S = _numbers(3, P)
+    b = np.array([(R[1] + R[2]) / 2, (R[0] + R[2]) / 2, (R[0] + R[1]) / 2])
+    by_hand = sum((R[m] - b[m]) * S[m] for m in range(3)) / 3
+    est = zeroth_order(obj, np.zeros(P), np.random.default_rng(0), 3,
+                       runner=FixedRunner(R, np.zeros((3, P)), S))  # fmt: skip
+    np.testing.assert_allclose(est.grad, by_hand, rtol=1e-14, atol=1e-15)
+    # the same three with a dropped rollout between them (its numbers are NaN, as the engine's)
+    R4 = np.array([R[0], np.nan, R[1], R[2]])
+    S4 = np.vstack([S[0], np.full(P, np.nan), S[1], S[2]])
+    est4 = zeroth_order(obj, np.zeros(P), np.random.default_rng(0), 4,
+                        runner=FixedRunner(R4, np.zeros((4, P)), S4, [1, 0, 1, 1]))  # fmt: skip
+    np.testing.assert_allclose(est4.grad, by_hand, rtol=1e-14, atol=1e-15)
+    assert est4.dropped == 1 and est4.value == pytest.approx(R.mean())
+
+
+@pytest.mark.parametrize("M", [2, 3])
+def test_first_order_and_alpha_order_are_their_formulas(M):
+    """FO: the mean of the per-rollout gradients; alpha-order: alpha FO + (1 - alpha) ZO of the
+    same rollouts, with ZO's leave-one-out baseline."""
+    obj = point_mass_objective()
+    P = obj.policy.n_params
+    R, G, S = _numbers(M, P)
+    fo = first_order(obj, np.zeros(P), np.random.default_rng(0), M, runner=FixedRunner(R, G, S))
+    np.testing.assert_allclose(fo.grad, G.sum(axis=0) / M, rtol=1e-14, atol=1e-15)
+    loo = np.array([(R.sum() - R[m]) / (M - 1) for m in range(M)])
+    zo = sum((R[m] - loo[m]) * S[m] for m in range(M)) / M
+    alpha = 0.25
+    est = alpha_order(obj, np.zeros(P), np.random.default_rng(0), M, alpha,
+                      runner=FixedRunner(R, G, S))  # fmt: skip
+    np.testing.assert_allclose(est.grad, alpha * G.mean(axis=0) + (1 - alpha) * zo,
+                               rtol=1e-13, atol=1e-15)  # fmt: skip
+
+
+def test_the_likelihood_score_of_a_linear_policy_is_its_formula():
+    """The zeroth-order estimate from real rollouts at M = 2 and 3, recomputed by hand from the
+    states the rollouts visited: for u = K x + k + sigma xi, the score of rollout m is
+    sum_t (xi_t / sigma) x_t^T (for K) and sum_t xi_t / sigma (for k)."""
+    obj = point_mass_objective(horizon=5, sigma=0.3)
+    P = obj.policy.n_params
+    theta = 0.1 * np.cos(np.arange(P))
+    for M in (2, 3):
+        est = zeroth_order(obj, theta, np.random.default_rng(5), M)
+        key = noise_key(np.random.default_rng(5))  # the key the estimator drew
+        noise = obj.noise(np.random.default_rng(5), M)
+        traj = obj.rollout(theta, noise, gradient=False)
+        R = np.asarray(traj.returns)
+        scores = []
+        for m in range(M):
+            xi = noise[m] / obj.sigma  # (H, nu)
+            dK = sum(np.outer(xi[t], traj.x[m, t]) for t in range(obj.horizon))
+            scores.append(np.concatenate([dK.ravel(), xi.sum(axis=0)]))
+        loo = np.array([(R.sum() - R[m]) / (M - 1) for m in range(M)])
+        by_hand = sum((R[m] - loo[m]) * scores[m] for m in range(M)) / M
+        np.testing.assert_allclose(est.grad, by_hand, rtol=1e-10, atol=1e-12)
+        stats = rollout_stats(obj, RolloutJob(theta, key, 0, M), gradient=False, score=True)
+        np.testing.assert_allclose(stats.score, np.array(scores), rtol=1e-12, atol=1e-12)
+
+
+# ================================================================================ the fits
+
+
+class _ConstantLoss:
+    """A loss that is the same everywhere (value ``value``, gradient 0)."""
+
+    def __init__(self, value: float, P: int = 1):
+        self.value, self.P = value, P
+
+    def __call__(self, theta) -> LossValue:
+        return LossValue(self.value, np.zeros(self.P), np.array([self.value]), np.ones(1, bool),
+                         tuple(f"p{i}" for i in range(self.P)))  # fmt: skip
+
+
+@pytest.mark.parametrize("bad", [0, -3, 1.5, True, "5", None])
+def test_fits_refuse_iteration_counts_that_are_not_whole_numbers_from_one(bad):
+    with pytest.raises(ValueError, match=r"iterations must be an integer >= 1"):
+        fit_gradient(_ConstantLoss(1.0), [0.0], 1.0, iterations=bad)
+    with pytest.raises(ValueError, match=r"iterations must be an integer >= 1"):
+        fit_random_search(_ConstantLoss(1.0), [0.0], 1.0, iterations=bad)
+    with pytest.raises(ValueError, match=r"directions must be an integer >= 1"):
+        fit_random_search(_ConstantLoss(1.0), [0.0], 1.0, directions=bad)
+
+
+def test_a_fit_whose_every_loss_is_infinite_does_not_say_converged():
+    """L-BFGS-B, given inf and a zero gradient, reports "CONVERGENCE: NORM OF PROJECTED
+    GRADIENT <= PGTOL"; the result's status says nothing was fitted."""
+    for value in (np.inf, np.nan):
+        result = fit_gradient(_ConstantLoss(value), [0.0, 1.0], 1.0, iterations=5)
+        assert result.status == "no_finite_loss" and not result.converged
+        search = fit_random_search(_ConstantLoss(value), [0.0], 1.0, iterations=2)
+        assert search.status == "no_finite_loss" and not search.converged
+    flat = fit_gradient(_ConstantLoss(2.0), [0.0], 1.0, iterations=5)
+    assert flat.status == "converged" and flat.loss == 2.0
+    assert set(STATUSES) >= {flat.status, result.status}
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"lower": [0.0, 0.0, 0.0]}, r"lower must be None, a number or \(2,\) numbers"),
+        ({"upper": np.ones((2, 2))}, r"upper must be None, a number or \(2,\) numbers"),
+        ({"lower": "low"}, r"lower must be None, a number or \(2,\) numbers"),
+        ({"scale": [1.0, 1.0, 1.0]}, r"scale must be a number or \(2,\) numbers"),
+        ({"theta0": [1j, 0.0]}, r"theta0 must be a vector of real numbers"),
+        ({"tol": 0.0}, r"tol must be a finite number > 0"),
+    ],
+)
+def test_fit_bounds_scales_and_starts_of_the_wrong_form_are_named(kwargs, message):
+    args = {"theta0": [0.5, 0.5], "scale": 1.0} | kwargs
+    theta0, scale = args.pop("theta0"), args.pop("scale")
+    with pytest.raises(ValueError, match=message):
+        fit_gradient(_ConstantLoss(1.0, 2), theta0, scale, iterations=3, **args)
+
+
+# a 1 kg box on prismatic x and z joints, one frictionless point 0.1 m below its centre
+FALLING_BOX = {
+    "name": "falling_box",
+    "time_step": 0.005,
+    "models": [{"file": "drake_abs:models/box_translating.sdf"}],
+    "contacts": [{"body": "box", "points": [[0.0, 0.0, -0.1]]}],
+    "friction_directions": 2,
+}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def box_stepper():
+    from drake_abs.multibody import Scene, build_scene_model
+
+    return build_scene_model(Scene.from_dict(FALLING_BOX)).stepper()
+
+
+def _box_data(stepper, n: int = 4):
+    x = np.tile([0.0, 0.102, 0.0, -0.5], (n, 1))  # just above the ground, falling
+    u = np.zeros((n, 1))
+    return x, u, stepper.step(x, u, jacobians=False).x_next
+
+
+def test_a_loss_over_no_data_is_refused(box_stepper):
+    from drake_abs.learning.scene_losses import ModelLoss, explicit_loss
+
+    empty = np.zeros((0, 4)), np.zeros((0, 1)), np.zeros((0, 4))
+    for kind, eps in (("explicit", None), ("violation_implicit", 0.1)):
+        with pytest.raises(ValueError, match=r"x must hold at least one transition"):
+            ModelLoss(box_stepper, *empty, ["ground_height"], kind, eps=eps)
+    with pytest.raises(ValueError, match=r"x must hold at least one transition"):
+        explicit_loss(box_stepper, *empty)
+
+
+@pytest.mark.parametrize(
+    "names, message",
+    [
+        (["mass[box]", "mass[box]"], r"'mass\[box\]' and 'mass\[box\]' both set 'mass\[box\]' "
+                                     r"\(the same name given twice\)"),
+        (["unit_inertia[box].*", "unit_inertia[box].xx"],
+         r"'unit_inertia\[box\].xx' and 'unit_inertia\[box\].\*' both set"),
+        (["ground_height", "mass[*]", "mass[box]"], r"'mass\[box\]' and 'mass\[\*\]' both set"),
+    ],
+)  # fmt: skip
+def test_a_parameter_named_twice_is_refused_by_name(box_stepper, names, message):
+    """Two names for one column: the column would take the last value, and the gradient of
+    the first would be reported for a parameter that moves nothing."""
+    from drake_abs.learning.scene_losses import ModelLoss, learned_values, stepper_at
+
+    data = _box_data(box_stepper)
+    with pytest.raises(ValueError, match=message):
+        ModelLoss(box_stepper, *data, names, "explicit")
+    with pytest.raises(ValueError, match=r"names must name each parameter once"):
+        learned_values(box_stepper, names)
+    with pytest.raises(ValueError, match=r"names must name each parameter once"):
+        stepper_at(box_stepper, names, np.ones(len(names)))
+
+
+def test_complex_or_text_data_is_refused_by_name(box_stepper):
+    from drake_abs.learning.scene_losses import ModelLoss
+
+    x, u, x_next = _box_data(box_stepper)
+    with pytest.raises(ValueError, match=r"x_next must be an array of real numbers; got dtype "
+                                         r"complex128"):  # fmt: skip
+        ModelLoss(box_stepper, x, u, x_next + 0j, ["ground_height"])
+    with pytest.raises(ValueError, match=r"u must be an array of real numbers"):
+        ModelLoss(box_stepper, x, u.astype(str), x_next, ["ground_height"])
