@@ -278,3 +278,47 @@ def test_complex_or_text_data_is_refused_by_name(box_stepper):
         ModelLoss(box_stepper, x, u, x_next + 0j, ["ground_height"])
     with pytest.raises(ValueError, match=r"u must be an array of real numbers"):
         ModelLoss(box_stepper, x, u.astype(str), x_next, ["ground_height"])
+
+
+# ============================================================================== Ray runner
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"workers": 0}, r"workers must be a whole number >= 1 or None; got 0"),
+        ({"workers": 2.5}, r"workers must be a whole number >= 1 or None; got 2.5"),
+        ({"workers": True}, r"workers must be a whole number >= 1 or None; got True"),
+        ({"chunk_size": 0}, r"chunk_size must be a whole number >= 1 or None"),
+        ({"max_retries": -1}, r"max_retries must be a whole number >= 0"),
+        ({"address": ""}, r"address must be None \(a local cluster\), 'auto'"),
+        ({"address": "  "}, r"address must be None \(a local cluster\), 'auto'"),
+    ],
+)
+def test_bad_runner_arguments_are_refused_before_any_cluster_starts(kwargs, message):
+    ray = pytest.importorskip("ray")
+    from drake_abs.parallel import RayRunner
+
+    before = ray.is_initialized()
+    with pytest.raises(ValueError, match=message):
+        RayRunner(**kwargs)
+    assert ray.is_initialized() == before  # no cluster was started for a refused argument
+
+
+def test_more_workers_than_the_cluster_has_cpus_is_refused_not_a_hang():
+    """Each actor holds one CPU: on a 1-CPU cluster a second actor never starts and the tasks
+    sent to it wait for ever."""
+    ray = pytest.importorskip("ray")
+    from drake_abs.parallel import RayRunner, connect, shutdown
+
+    if ray.is_initialized():
+        pytest.skip("needs its own 1-CPU cluster")
+    connect(num_cpus=1)
+    try:
+        with pytest.raises(ValueError, match=r"workers must be at most the cluster's CPUs \(1\)"
+                                             r", one CPU per worker; got 2"):  # fmt: skip
+            RayRunner(workers=2)
+        with RayRunner() as runner:
+            assert runner.workers == 1
+    finally:
+        shutdown()

@@ -120,8 +120,9 @@ class RayRunner:
     """Runs estimators' rollout jobs on ``workers`` Ray actors (one CPU each).
 
     Args:
-        workers: actors to start (default: the cluster's CPUs). Each keeps the objectives it is
-            sent, with their steppers.
+        workers: actors to start, a whole number from 1 to the cluster's CPUs (default: the
+            cluster's CPUs; more is a ValueError, as each actor holds one CPU and the extra ones
+            would never start). Each keeps the objectives it is sent, with their steppers.
         chunk_size: most rollouts per task (default: ``ceil(total / workers)``, one task per
             actor). Smaller chunks balance uneven machines at a per-task overhead.
         max_retries: restarts of a dead actor, and re-runs of its unfinished tasks.
@@ -137,16 +138,35 @@ class RayRunner:
         max_retries: int = 3,
         address: str | None = None,
     ):
-        ray = require_ray()
-        if not ray.is_initialized():
-            connect(address)
+        # every argument is checked before a cluster is started or joined
         for name, value in (("workers", workers), ("chunk_size", chunk_size)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                       or value < 1):  # fmt: skip
                 raise ValueError(f"{name} must be a whole number >= 1 or None; got {value!r}")
         if isinstance(max_retries, bool) or not isinstance(max_retries, int) or max_retries < 0:
             raise ValueError(f"max_retries must be a whole number >= 0; got {max_retries!r}")
-        self.workers = workers if workers is not None else max(1, cluster_cpus())
+        if address is not None and (not isinstance(address, str) or not address.strip()):
+            raise ValueError(
+                "address must be None (a local cluster), 'auto', 'HOST:PORT' or "
+                f"'ray://HOST:PORT'; got {address!r}"
+            )
+        ray = require_ray()
+        if not ray.is_initialized():
+            connect(address)
+        cpus = cluster_cpus()
+        if cpus < 1:
+            raise ValueError(
+                "the Ray cluster has no CPU, so no worker can start (each takes one); start it "
+                "with num_cpus >= 1"
+            )
+        if workers is not None and workers > cpus:
+            # each actor holds one CPU: the actors beyond the cluster's CPUs would never start,
+            # and the tasks sent to them would wait for ever
+            raise ValueError(
+                f"workers must be at most the cluster's CPUs ({cpus}), one CPU per worker; got "
+                f"{workers} (give workers=None to use them all)"
+            )
+        self.workers = workers if workers is not None else cpus
         self.chunk_size = chunk_size
         self.max_retries = max_retries
         actor = ray.remote(_RolloutWorker).options(
