@@ -10,7 +10,17 @@ import numpy as np
 
 def as_finite_array(value, name: str, *, ndim: tuple[int, ...] | None = None) -> np.ndarray:
     """Return ``value`` as a float64 array, raising ``ValueError`` naming ``name`` when it is not
-    numeric, not finite, or has a number of dimensions outside ``ndim``."""
+    numeric, complex (its imaginary part would be dropped), not finite, or has a number of
+    dimensions outside ``ndim``."""
+    try:
+        complex_values = np.iscomplexobj(value)
+    except (TypeError, ValueError):  # not array-like: reported below
+        complex_values = False
+    if complex_values:
+        raise ValueError(
+            f"{name} must be a real numeric array; got complex values (the imaginary part would "
+            "be dropped)"
+        )
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -27,6 +37,18 @@ def as_finite_array(value, name: str, *, ndim: tuple[int, ...] | None = None) ->
             "all entries must be finite"
         )
     return arr
+
+
+def as_real_number(value, name: str, *, minimum: float | None = None) -> float:
+    """Return ``value`` as a ``float``, raising ``ValueError`` naming ``name`` unless it is a
+    real number (int, float or a numpy real scalar; not a bool, a string or a complex number)
+    that is finite and, given ``minimum``, at least ``minimum``."""
+    real = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if not real or not np.isfinite(float(value)):
+        raise ValueError(f"{name} must be a finite real number; got {value!r}")
+    if minimum is not None and value < minimum:
+        raise ValueError(f"{name} must be a finite real number >= {minimum:g}; got {value!r}")
+    return float(value)
 
 
 def check_shape(arr: np.ndarray, expected: tuple[int, ...], name: str, form: str) -> None:

@@ -322,3 +322,95 @@ def test_more_workers_than_the_cluster_has_cpus_is_refused_not_a_hang():
             assert runner.workers == 1
     finally:
         shutdown()
+
+
+# ========================================================= quiet conversions: tasks and env
+
+
+@pytest.fixture(scope="module")
+def hopper():
+    from drake_abs.tasks.locomotion import locomotion_task
+
+    return locomotion_task("hopper")
+
+
+@pytest.fixture(scope="module")
+def hopper_env(hopper):
+    pytest.importorskip("gymnasium")
+    from drake_abs.tasks.gym_env import DrakeAbsEnv
+
+    return DrakeAbsEnv(hopper)
+
+
+@pytest.mark.parametrize("bad", [1.7, "5", True, np.nan, np.inf, 0, -3, None, 2 + 0j])
+def test_a_horizon_is_a_whole_number_of_steps_from_one(hopper, bad):
+    """1.7 used to run one step, "5" five and True one; NaN and inf ended in int()'s error."""
+    inner = LinearPolicy(hopper.n_obs, hopper.nu)
+    with pytest.raises(ValueError, match=r"horizon must be an integer >= 1; got "):
+        hopper.objective(inner, horizon=bad)
+    with pytest.raises(ValueError, match=r"horizon must be an integer >= 1; got "):
+        point_mass_objective(horizon=bad)
+
+
+def test_an_integral_horizon_is_kept_as_an_int(hopper):
+    obj = hopper.objective(LinearPolicy(hopper.n_obs, hopper.nu), horizon=np.int64(5))
+    assert obj.horizon == 5 and type(obj.horizon) is int
+    assert point_mass_objective(horizon=5.0).horizon == 5
+
+
+@pytest.mark.parametrize("bad", ["0.1", None, np.nan, -0.1, True, 0.1j])
+def test_sigma_is_a_finite_real_number(hopper, bad):
+    with pytest.raises(ValueError, match=r"sigma must be a finite real number"):
+        hopper.objective(LinearPolicy(hopper.n_obs, hopper.nu), horizon=3, sigma=bad)
+
+
+def test_complex_theta_x0_and_actions_are_refused_not_cast():
+    """numpy drops the imaginary part with only a ComplexWarning: refused by name instead."""
+    obj = point_mass_objective()
+    P = obj.policy.n_params
+    with pytest.raises(ValueError, match=r"theta must be a real numeric array; got complex"):
+        first_order(obj, np.zeros(P) + 1j, np.random.default_rng(0), 2)
+    with pytest.raises(ValueError, match=r"theta must be a real numeric array; got complex"):
+        obj.policy.act(np.zeros(P, complex), np.zeros((1, NX)))
+    with pytest.raises(ValueError, match=r"x0 must be a real numeric array; got complex"):
+        PolicyObjective(obj.stepper, obj.policy, obj.reward, obj.x0 + 0j, 3)
+
+
+def test_the_env_refuses_a_complex_or_non_finite_action(hopper_env):
+    hopper_env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action must be a real numeric array; got complex"):
+        hopper_env.step(np.array([0.1, 0.0, 0.0]) + 0.5j)
+    with pytest.raises(ValueError, match=r"action contains NaN or inf"):
+        hopper_env.step(np.array([0.0, np.nan, 0.0]))
+    with pytest.raises(ValueError, match=r"q must be a real numeric array; got complex"):
+        hopper_env.set_state(hopper_env.state[:6] + 0j, hopper_env.state[6:])
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"bogus": 1}, r"unknown option\(s\) \['bogus'\] of locomotion_task\('hopper'\)"),
+        ({"max_iteration": 20}, r"unknown option\(s\) \['max_iteration'\]"),
+        ({"max_iterations": 2.5}, r"max_iterations must be an integer >= 1"),
+        ({"tol": "small"}, r"tol must be a finite real number"),
+        ({"control_period": True}, r"control_period must be a finite number > 0"),
+    ],
+)
+def test_unknown_or_bad_task_options_are_refused_when_the_env_is_built(options, message):
+    """DrakeAbsEnv("hopper", bogus=1) used to build and fail at its first step."""
+    pytest.importorskip("gymnasium")
+    from drake_abs.tasks.gym_env import DrakeAbsEnv
+
+    with pytest.raises(ValueError, match=message):
+        DrakeAbsEnv("hopper", **options)
+
+
+def test_a_stepper_refuses_unknown_solver_options_when_built():
+    from drake_abs.multibody import Scene, build_scene_model
+
+    model = build_scene_model(Scene.from_dict(FALLING_BOX))
+    with pytest.raises(ValueError, match=r"unknown stepper option\(s\) \['bogus'\]"):
+        model.stepper(bogus=1)
+    with pytest.raises(ValueError, match=r"strict must be True or False"):
+        model.stepper(strict="yes")
+    assert model.stepper(max_iterations=50, strict=True).solver_options["max_iterations"] == 50

@@ -18,15 +18,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drake_abs._validation import batch_of_states
+from drake_abs._validation import as_real_number, batch_of_states
 from drake_abs.contact.compliance import ContactCompliance
 from drake_abs.contact.cone import FORMULATIONS, FrictionCone
-from drake_abs.contact.contact_lcp import contact_step
+from drake_abs.contact.contact_lcp import CONTACT_SOLVER_DEFAULTS, contact_step
 from drake_abs.contact.damping import JointSprings, damped_parameters, effective_damping
 from drake_abs.contact.lcs import GradientMode, check_gradient_mode
 from drake_abs.contact.smoothing import Exact, Smoothing
 from drake_abs.contact.step import Step
 from drake_abs.contact.step_data import ParameterDerivatives, StepQuantities
+from drake_abs.lcp.ipm import check_solver_options
 from drake_abs.multibody.drake_dynamics import ContactModelBase
 from drake_abs.multibody.floating import normalize_quaternions
 from drake_abs.multibody.joint_friction import JointFrictionRows, JointFrictionSmoothing
@@ -51,6 +52,12 @@ from drake_abs.multibody.parameters import (
 #: is solved again with it (see ``ComplementarityStepper._repair``)
 REPAIR_TOL = 1e-6
 MAX_REPAIRS = 3
+
+#: The options a stepper passes on to its contact solve (``**solver_options``): the
+#: interior-point solver's ``tol``, ``max_iterations`` and ``exact_tol``
+#: (:func:`drake_abs.solve_lcp`) and ``strict`` (raise instead of flagging an unconverged
+#: solve). Any other name is refused when the stepper is built.
+SOLVER_OPTIONS = ("tol", "max_iterations", "exact_tol", "strict")
 
 
 @dataclass(frozen=True)
@@ -83,6 +90,26 @@ class ContactProblem:
 class StepOverflowWarning(UserWarning):
     """A step from a finite state gave a non-finite next state or Jacobian (e.g. explicit
     Coriolis terms at very large joint velocities); its ``converged`` flag is False."""
+
+
+def check_solver_options_given(options: Mapping) -> None:
+    """Refuse, when a stepper is built rather than at its first step, a solver option that is
+    not one of :data:`SOLVER_OPTIONS` (a misspelt or misplaced setting would otherwise fail
+    only when stepping) or that has a bad value (``ValueError`` naming it)."""
+    unknown = sorted(set(options) - set(SOLVER_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"unknown stepper option(s) {unknown}: a stepper takes smoothing, gradient, "
+            "activation_distance, friction, joint_limits, damping, springs, joint_friction, "
+            f"compliance and the solver's {', '.join(SOLVER_OPTIONS)}"
+        )
+    for name in ("tol", "exact_tol"):
+        if name in options:
+            as_real_number(options[name], name)
+    merged = {**CONTACT_SOLVER_DEFAULTS, "tol": 1e-12, **options}
+    check_solver_options(merged["tol"], merged["max_iterations"], merged["exact_tol"])
+    if "strict" in options and not isinstance(options["strict"], bool | np.bool_):
+        raise ValueError(f"strict must be True or False; got {options['strict']!r}")
 
 
 class ComplementarityStepper:
@@ -138,6 +165,7 @@ class ComplementarityStepper:
         **solver_options,
     ):
         check_gradient_mode(gradient)
+        check_solver_options_given(solver_options)
         if friction not in FORMULATIONS:
             raise ValueError(f"friction must be one of {FORMULATIONS}; got {friction!r}")
         self.friction = friction

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drake_abs._validation import as_count, as_finite_array, as_real_number
 from drake_abs.contact.unconverged import (
     OnUnconverged,
     UnconvergedStepError,
@@ -61,8 +62,9 @@ class PolicyObjective:
         policy: a :class:`~drake_abs.engine.Policy` (e.g. of :mod:`drake_abs.policy.policies`).
         reward: a :class:`~drake_abs.engine.Reward` (maximised).
         x0: (nx,) initial state.
-        horizon: H steps.
-        sigma: exploration noise scale (units of u).
+        horizon: H steps, a whole number >= 1 (an integral float such as 5.0 is taken as 5;
+            1.7, text, booleans, NaN and inf are refused).
+        sigma: exploration noise scale (units of u), a finite real number >= 0.
         on_unconverged: ``"drop"`` (default), ``"flag"`` or ``"raise"``: what rollouts with an
             unconverged solver step count for (:func:`~drake_abs.engine.rollout`).
     """
@@ -80,7 +82,7 @@ class PolicyObjective:
         check_protocol(self.stepper, Stepper, "stepper", STEPPER_FORM)
         check_protocol(self.policy, Policy, "policy", "nx, nu, n_params, act, jacobians, vjp")
         check_reward(self.reward)
-        x0 = np.asarray(self.x0, dtype=float)
+        x0 = as_finite_array(self.x0, "x0")
         if x0.shape != (self.policy.nx,):
             raise ValueError(
                 f"x0 must have shape (nx,) = ({self.policy.nx},), the policy's state size; got "
@@ -93,10 +95,9 @@ class PolicyObjective:
                     f"reward and policy disagree on {size}: the reward's is {theirs}, the "
                     f"policy's {mine}"
                 )
-        if int(self.horizon) < 1:
-            raise ValueError(f"horizon must be >= 1; got {self.horizon!r}")
-        if not (np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValueError(f"sigma must be >= 0; got {self.sigma!r}")
+        # a whole number of steps >= 1 (1.7, "5", True and NaN are refused, not truncated)
+        object.__setattr__(self, "horizon", as_count(self.horizon, "horizon", minimum=1))
+        object.__setattr__(self, "sigma", as_real_number(self.sigma, "sigma", minimum=0.0))
 
     def noise(self, rng: np.random.Generator, M: int) -> np.ndarray:
         """(M, H, nu) standard-normal exploration noise: rollouts 0..M-1 of a fresh stream of
@@ -185,11 +186,10 @@ def zeroth_order(
     obj: PolicyObjective, theta, rng: np.random.Generator, M: int, *, runner: Runner | None = None
 ) -> GradientEstimate:
     """ZOPG: likelihood ratio with a leave-one-out baseline, from M rollouts (M >= 2)."""
-    if M < 2:
-        raise ValueError(f"M must be >= 2 for the leave-one-out baseline; got {M}")
+    M = _count(M, "M", 2)  # the leave-one-out baseline needs another sample
     if obj.sigma <= 0:
         raise ValueError("the likelihood-ratio estimator needs exploration noise: sigma > 0")
-    job = RolloutJob(theta, noise_key(rng), 0, _count(M, "M", 2))
+    job = RolloutJob(theta, noise_key(rng), 0, M)
     (s,) = _run(obj, runner, [job], gradient=False, score=True)
     _require(int(s.used.sum()), 2, "zeroth_order")
     R = s.returns[s.used]
@@ -202,6 +202,7 @@ def alpha_order(
     runner: Runner | None = None,
 ) -> GradientEstimate:  # fmt: skip
     """``alpha g_FO + (1 - alpha) g_ZO`` from the same M rollouts (alpha in [0, 1])."""
+    alpha = as_real_number(alpha, "alpha")
     if not 0.0 <= alpha <= 1.0:
         raise ValueError(f"alpha must be in [0, 1]; got {alpha!r}")
     if obj.sigma <= 0:
@@ -220,9 +221,9 @@ def randomized_smoothing(
 ) -> GradientEstimate:  # fmt: skip
     """Bundled gradient: the mean first-order gradient at N parameters theta + w_i,
     ``w_i ~ N(0, std^2 I)``, one rollout each (rollout i of one noise stream)."""
-    if not (np.isfinite(std) and std > 0):
+    if as_real_number(std, "std") <= 0:
         raise ValueError(f"std must be a finite number > 0; got {std!r}")
-    theta = np.asarray(theta, float)
+    theta = as_finite_array(theta, "theta", ndim=(1,))
     w = std * rng.standard_normal((_count(N, "N"), theta.size))
     key = noise_key(rng)
     jobs = [RolloutJob(theta + w[i], key, i, i + 1) for i in range(N)]
@@ -248,8 +249,10 @@ def ars(
     J(theta - s d)) d`` over b = ``top`` of ``directions`` Gaussian directions d, with s =
     ``step``; each J from M rollouts with common noise for the + and - evaluation. Returned as
     an ascent direction in the units ARS steps with (not divided by s)."""
-    theta = np.asarray(theta, float)
+    theta = as_finite_array(theta, "theta", ndim=(1,))
     directions = _count(directions, "directions")
+    if as_real_number(step, "step") <= 0:
+        raise ValueError(f"step must be a finite number > 0; got {step!r}")
     top = directions if top is None else int(top)
     if not 1 <= top <= directions:
         raise ValueError(f"top must be in [1, directions = {directions}]; got {top}")

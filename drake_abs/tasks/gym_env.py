@@ -37,7 +37,7 @@ except ImportError as err:  # pragma: no cover - gymnasium is in the dev extra
         "of drake-abs)"
     ) from err
 
-from drake_abs._validation import as_count
+from drake_abs._validation import as_count, as_finite_array
 from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
 
 __all__ = ["ENV_IDS", "DrakeAbsEnv", "TaskSteps", "register_envs", "step_task"]
@@ -101,8 +101,8 @@ class DrakeAbsEnv(gymnasium.Env):
 
     def set_state(self, q, v) -> None:
         """Set the state to (q, v) (as MuJoCo environments' ``set_state(qpos, qvel)``)."""
-        x = np.concatenate([np.asarray(q, float).ravel(), np.asarray(v, float).ravel()])
-        if x.shape != self._x.shape or not np.all(np.isfinite(x)):
+        x = np.concatenate([as_finite_array(q, "q").ravel(), as_finite_array(v, "v").ravel()])
+        if x.shape != self._x.shape:
             raise ValueError(
                 f"q and v must be finite with {self._x.size} entries in all; got {x.shape}"
             )
@@ -126,7 +126,7 @@ class DrakeAbsEnv(gymnasium.Env):
     def step(self, action):
         """Apply ``action`` (nu,) for one time step. Returns (observation, reward, terminated,
         truncated, info)."""
-        a = np.asarray(action, dtype=float)
+        a = as_finite_array(action, "action", ndim=(1,))
         if a.shape != (self.task.nu,):
             raise ValueError(f"action must have shape (nu,) = ({self.task.nu},); got {a.shape}")
         steps = step_task(self.task, self._x[None], a[None])
@@ -188,8 +188,8 @@ def step_task(task, x, u) -> TaskSteps:
         ValueError: x or u of the wrong shape.
         FloatingPointError: a next state is not finite (the rows, states and actions named).
     """
-    x = np.asarray(x, dtype=float)
-    u = np.asarray(u, dtype=float)
+    x = as_finite_array(x, "x", ndim=(2,))
+    u = as_finite_array(u, "u", ndim=(2,))
     nx, nu = task.x0.size, task.nu
     if x.ndim != 2 or x.shape[1] != nx or u.shape != (x.shape[0], nu):
         raise ValueError(

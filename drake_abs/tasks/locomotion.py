@@ -577,6 +577,11 @@ TASKS: dict[str, _TaskSpec] = {
 }
 
 
+#: The settings of the scene's stepper that :func:`locomotion_task` passes on
+#: (:meth:`drake_abs.multibody.builder.SceneModel.stepper`), besides the solver's options.
+STEPPER_SETTINGS = ("activation_distance", "gradient", "friction")
+
+
 def locomotion_task(
     name: Literal["hopper", "half_cheetah", "walker2d", "ant"],
     *,
@@ -607,11 +612,22 @@ def locomotion_task(
         raise ValueError(f"name must be one of {sorted(TASKS)}; got {name!r}")
     from drake_abs.multibody.builder import build_scene_model  # Drake, only when building
     from drake_abs.multibody.scene import Scene
+    from drake_abs.multibody.stepper import SOLVER_OPTIONS
+
+    # refused here, before the scene is built (and not at the first step)
+    unknown = sorted(set(stepper) - set(STEPPER_SETTINGS) - set(SOLVER_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {unknown} of locomotion_task({name!r}): it takes smoothing, "
+            "reward_options, control_period, substeps and the stepper's "
+            f"{', '.join(STEPPER_SETTINGS + SOLVER_OPTIONS)}"
+        )
 
     spec = TASKS[name]
     scene = Scene.load(spec.scene)
     dt = spec.control_period if control_period is None else control_period
-    if not (isinstance(dt, (int, float, np.floating)) and np.isfinite(dt) and dt > 0):
+    real = isinstance(dt, int | float | np.integer | np.floating) and not isinstance(dt, bool)
+    if not (real and np.isfinite(dt) and dt > 0):
         raise ValueError(f"control_period must be a finite number > 0 (s); got {dt!r}")
     dt = float(dt)
     if substeps is None:
