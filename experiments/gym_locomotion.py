@@ -131,16 +131,32 @@ def _version() -> str:
 
 def run_identity(config: Config, task: str, method: str, seed: int) -> dict:
     """What defines one run's numbers (its ``run.json`` must match to be reused): the task,
-    method, seed, budget, scoring, drake-abs version and the settings its trainer reads
-    (:meth:`~drake_abs.tasks.training_runs.RunSettings.for_method`)."""
+    method, seed, budget, scoring, drake-abs version, the settings its trainer reads
+    (:meth:`~drake_abs.tasks.training_runs.RunSettings.for_method`) and the task's scene as
+    it is now (:func:`scene_fingerprint`: a scene file edited within a version restarts its
+    runs)."""
     settings = config.settings.for_method(method)
     return {
         "task": task, "method": method, "seed": int(seed), "env_steps": int(config.env_steps),
+        "scene": scene_fingerprint(task),
         "settings": outputs_jsonable(settings),
         "evaluations": int(config.evaluations), "score_seeds": int(config.score_seeds),
         "episode_steps": int(config.episode_steps), "plant_score": bool(config.plant_score),
         "drake_abs_version": _version(),
     }  # fmt: skip
+
+
+def scene_fingerprint(task: str) -> str:
+    """A digest (16 hex digits) of the task's scene as loaded (every key of its YAML file,
+    resolved), which changes when the scene's model changes."""
+    import hashlib
+
+    from drake_abs.multibody.scene import Scene
+    from drake_abs.tasks.locomotion import TASKS as KNOWN
+
+    scene = Scene.load(KNOWN[task].scene).to_dict()
+    text = json.dumps(scene, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def outputs_jsonable(value):

@@ -103,6 +103,8 @@ def test_a_run_is_defined_by_the_settings_its_trainer_reads():
         other, "hopper", "shac_abs", 0
     )
     assert g.run_identity(cfg, "hopper", "ars", 0) != g.run_identity(cfg, "hopper", "ars", 1)
+    assert g.run_identity(cfg, "hopper", "ars", 0)["scene"] == g.scene_fingerprint("hopper")
+    assert g.scene_fingerprint("hopper") != g.scene_fingerprint("walker2d")
     more = replace(cfg, settings=replace(cfg.settings, sb3_envs=4))
     assert g.run_identity(cfg, "hopper", "shac_abs", 0) == g.run_identity(
         more, "hopper", "shac_abs", 0

@@ -41,7 +41,7 @@ SIZES = {
     "go1_drop": (18, 18, 12, 4),  # example-robot-data's Unitree Go1 as published
     # gymnasium's MuJoCo files as published (their rollouts: tests/multibody/test_model_files.py)
     "gym_hopper": (6, 6, 3, 5),
-    "gym_half_cheetah": (9, 9, 6, 7),
+    "gym_half_cheetah": (9, 9, 6, 16),  # both ends of every capsule
     "gym_walker2d": (9, 9, 6, 8),
     "gym_ant": (15, 14, 8, 13),  # a free torso on a quaternion (nq = nv + 1)
     "ur5_fall": (6, 6, 6, 4),  # example-robot-data's UR5 as published
