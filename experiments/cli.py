@@ -200,6 +200,9 @@ def add_ray_options(parser: argparse.ArgumentParser, ray_help: str) -> None:
 def wants_ray(sub: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
     """Whether the Ray options ask for Ray; a usage error (exit 2) for ``--workers`` with
     ``--address``, or when Ray is asked for but not installed."""
+    if args.address is not None and not args.address.strip():
+        sub.error("argument --address: expected a Ray cluster's address (auto, HOST:6379 or "
+                  f"ray://HOST:10001), got {args.address!r}")  # fmt: skip
     if args.address is not None and args.workers is not None:
         sub.error("argument --workers: sets the CPUs of a local Ray cluster; a cluster joined "
                   "with --address has its own")  # fmt: skip
@@ -272,12 +275,18 @@ def policy_argument(text: str) -> str:
     """An argparse type: a policy file (``.npz`` of the published format, as its absolute
     path), or a saved policy, its STEM.json (or STEM.npz, or STEM), as the JSON's absolute
     path."""
-    from drake_abs.policy.policy_files import is_policy_file
+    from drake_abs.policy.policy_files import is_policy_file, load_policy_file
     from drake_abs.policy.saving import policy_paths
 
     if is_policy_file(text):
         return str(Path(text).expanduser().resolve())
     json_path, _ = policy_paths(text)
+    path = Path(text).expanduser()
+    if path.suffix == ".npz" and path.is_file() and not json_path.is_file():
+        try:  # an npz that is no policy file (damaged, empty, other arrays): say what is wrong
+            load_policy_file(path)
+        except (ValueError, OSError) as err:
+            raise argparse.ArgumentTypeError(str(err)) from None
     if not json_path.is_file():
         raise argparse.ArgumentTypeError(
             f"no saved policy or policy file {text!r}: give a policy file (.npz with W, b or "
@@ -431,9 +440,36 @@ def _evaluate(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
 
 
 def _check_folder(parser: argparse.ArgumentParser, out: str | None) -> None:
+    """A usage error unless ``--out`` can be a results folder: not a file, and not under one."""
     path = None if out is None else Path(out).expanduser()
     if path is not None and path.exists() and not path.is_dir():
         parser.error(f"argument --out: {out!r} is a file, not a folder")
+    _check_parents(parser, "--out", out)
+
+
+def _check_parents(parser: argparse.ArgumentParser, option: str, value: str | None) -> None:
+    """A usage error when a folder above ``value`` (an output path) is an existing file, so
+    that the folder cannot be created; an empty ``value`` is refused too."""
+    if value is None:
+        return
+    if not value.strip():
+        parser.error(f"argument {option}: expected a path, got {value!r}")
+    for parent in Path(value).expanduser().absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                parser.error(
+                    f"argument {option}: {value!r} is under {str(parent)!r}, which is a file, "
+                    "not a folder"
+                )
+            return
+
+
+def _check_file(parser: argparse.ArgumentParser, option: str, value: str | None) -> None:
+    """A usage error unless ``value`` (an output file) can be written: not a folder, not under
+    a file."""
+    if value is not None and Path(value).expanduser().is_dir():
+        parser.error(f"argument {option}: {value!r} is a folder; give a file name")
+    _check_parents(parser, option, value)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -663,8 +699,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sub = parser.subcommands[args.command]
     if args.command == "record":
-        if args.out is not None and Path(args.out).expanduser().is_dir():
-            sub.error(f"argument --out: {args.out!r} is a folder; give an HTML file name")
+        _check_file(sub, "--out", args.out)
         from drake_abs.multibody.scene import Scene
 
         try:
@@ -673,12 +708,10 @@ def main(argv: list[str] | None = None) -> int:
             sub.error(f"argument SCENE: {err}")
         return _record(scene, args.steps, args.out)
     if args.command == "evaluate":
-        if args.json is not None and Path(args.json).expanduser().is_dir():
-            sub.error(f"argument --json: {args.json!r} is a folder; give a file name")
+        _check_file(sub, "--json", args.json)
         return _evaluate(sub, args)
     if args.command == "replay":
-        if args.out is not None and Path(args.out).expanduser().is_dir():
-            sub.error(f"argument --out: {args.out!r} is a folder; give an HTML file name")
+        _check_file(sub, "--out", args.out)
         from drake_abs.tasks.published_policies import load_for_task
         from drake_abs.tasks.saved_policies import load_policy
 

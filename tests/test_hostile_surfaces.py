@@ -13,6 +13,8 @@ own sample) cannot hide behind a statistical test.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -414,3 +416,135 @@ def test_a_stepper_refuses_unknown_solver_options_when_built():
     with pytest.raises(ValueError, match=r"strict must be True or False"):
         model.stepper(strict="yes")
     assert model.stepper(max_iterations=50, strict=True).solver_options["max_iterations"] == 50
+
+
+# ================================================ policy files, saved policies, command line
+
+
+def _usage_error(argv: list[str], capsys) -> str:
+    """Run the command line, expect a usage error (exit 2, no traceback); return its text."""
+    from drake_abs.experiments.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2, err
+    assert "Traceback" not in err and "error: " in err, err
+    return err
+
+
+def _damaged(source: Path, folder: Path) -> dict[str, Path]:
+    """Copies of the npz ``source``: cut in half, empty, one byte flipped in the middle (its
+    checksum then fails), the zip header's first bytes flipped."""
+    data = source.read_bytes()
+    middle = bytearray(data)
+    middle[len(data) // 2] ^= 0x55
+    header = bytearray(data)
+    header[:4] = bytes(b ^ 0xFF for b in header[:4])
+    out = {}
+    for name, content in (("truncated", data[: len(data) // 2]), ("empty", b""),
+                          ("flipped", bytes(middle)), ("header", bytes(header))):  # fmt: skip
+        folder.mkdir(parents=True, exist_ok=True)
+        out[name] = folder / f"{name}.npz"
+        out[name].write_bytes(content)
+    return out
+
+
+@pytest.fixture
+def policy_file(tmp_path) -> Path:
+    from drake_abs.policy.policy_files import PolicyFile
+
+    file = PolicyFile.linear(np.ones((3, 11)), np.zeros(3), env_id="Hopper-v5")
+    return file.save(tmp_path / "good.npz")
+
+
+@pytest.mark.parametrize("kind", ["truncated", "empty", "flipped", "header"])
+def test_a_damaged_policy_file_is_a_value_error_naming_it(policy_file, tmp_path, kind):
+    from drake_abs.policy.policy_files import is_policy_file, load_policy_file
+
+    path = _damaged(policy_file, tmp_path / "bad")[kind]
+    # it reads the archive's list of names only: a damaged member is found by the loader
+    assert is_policy_file(path) is (kind == "flipped")
+    with pytest.raises(ValueError, match=rf"'{path}' is not a policy file"):
+        load_policy_file(path)
+
+
+@pytest.mark.parametrize("kind", ["truncated", "empty", "flipped"])
+def test_replay_of_a_damaged_policy_file_is_a_usage_error(policy_file, tmp_path, kind, capsys):
+    path = _damaged(policy_file, tmp_path / "bad")[kind]
+    err = _usage_error(["replay", str(path)], capsys)
+    assert "argument POLICY" in err and str(path) in err
+
+
+@pytest.fixture
+def saved(tmp_path) -> dict[str, Path]:
+    from drake_abs.policy.saving import save_policy
+
+    policy = LinearPolicy(3, 2)
+    return save_policy(tmp_path / "saved" / "p", policy, np.arange(policy.n_params, dtype=float))
+
+
+@pytest.mark.parametrize("kind", ["truncated", "empty", "flipped", "header"])
+def test_a_saved_policy_with_damaged_arrays_is_a_value_error_naming_the_file(saved, kind):
+    from drake_abs.policy.saving import load_policy
+
+    good = saved["npz"].read_bytes()
+    bad = _damaged(saved["npz"], saved["npz"].parent / "copies")[kind]
+    saved["npz"].write_bytes(bad.read_bytes())
+    with pytest.raises(ValueError, match=rf"'{saved['npz']}' is not a saved policy's "
+                                         r"arrays file"):  # fmt: skip
+        load_policy(saved["json"])
+    saved["npz"].write_bytes(good)
+    assert load_policy(saved["json"]).theta.shape == (8,)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"n_params": 99}, r"n_params must be the LinearPolicy's number of parameters, 8; the "
+                           r"file says 99"),
+        ({"n_params": "8"}, r"n_params must be the LinearPolicy's number of parameters"),
+        ({"n_params": True}, r"n_params must be the LinearPolicy's number of parameters"),
+        ({"arrays": "../p.npz"}, r"'arrays' must be the name of the .npz file beside it"),
+        ({"arrays": "/etc/hostname"}, r"'arrays' must be the name of the .npz file beside it"),
+        ({"arrays": "sub/p.npz"}, r"'arrays' must be the name of the .npz file beside it"),
+        ({"arrays": "p.json"}, r"'arrays' must be the name of the .npz file beside it"),
+        ({"arrays": 5}, r"'arrays' must be the name of the .npz file beside it"),
+    ],
+)  # fmt: skip
+def test_a_saved_policys_record_is_checked(saved, change, message):
+    """n_params used to be ignored, and 'arrays' could name any file on the machine."""
+    import json
+
+    from drake_abs.policy.saving import load_policy
+
+    record = json.loads(saved["json"].read_text())
+    saved["json"].write_text(json.dumps(record | change))
+    with pytest.raises(ValueError, match=message):
+        load_policy(saved["json"])
+
+
+def test_output_paths_under_a_file_and_an_empty_address_are_usage_errors(
+    tmp_path, capsys, monkeypatch
+):
+    """They used to end in tracebacks (the folder cannot be made; Ray refused the address)."""
+    from drake_abs.experiments import cli
+
+    monkeypatch.setattr("drake_abs.parallel.sweep.run_sweep", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr(cli, "_run_standard", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr(cli, "_run_demo", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr(cli, "_record", lambda *a, **k: pytest.fail("ran"))
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder\n")
+    under = str(blocker / "sub")
+    for argv, option in [
+        (["sweep", "gradient-variance", "--test-size", "--out", under], "--out"),
+        (["experiment", "gradient-variance", "--test-size", "--out", under], "--out"),
+        (["demo", "--out", under], "--out"),
+        (["record", "ball-throw", "--out", under + "/x.html"], "--out"),
+        (["evaluate", "p.npz", "--json", under + "/x.json"], "--json"),
+        (["experiment", "gradient-variance", "--address", ""], "--address"),
+        (["sweep", "gradient-variance", "--address", " "], "--address"),
+    ]:
+        err = _usage_error(argv, capsys)
+        assert f"argument {option}: " in err, (argv, err)

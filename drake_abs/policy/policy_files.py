@@ -45,6 +45,9 @@ save format (:mod:`drake_abs.policy.saving`, npz + json with the config) is sepa
 from __future__ import annotations
 
 import re
+import struct
+import zipfile
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -64,6 +67,7 @@ __all__ = [
     "is_policy_file",
     "load_policy_file",
     "published_path",
+    "read_npz_arrays",
     "to_policy_file",
 ]
 
@@ -479,6 +483,15 @@ class PolicyFile:
         )  # fmt: skip
 
 
+#: What reading a damaged npz archive raises: not a zip archive or a bad checksum
+#: (BadZipFile), cut short (EOFError), a damaged compressed member (zlib.error), a damaged
+#: array header (ValueError, SyntaxError from the header's text), a pickled array (ValueError),
+#: flags of a damaged zip header (NotImplementedError: "compression method not supported",
+#: RuntimeError: "encrypted").
+_DAMAGED = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, SyntaxError,
+            KeyError, struct.error, NotImplementedError, RuntimeError)  # fmt: skip
+
+
 def _open_npz(path: Path):
     """``np.load`` of an npz archive (pickles refused); ``ValueError`` for anything else."""
     data = np.load(path, allow_pickle=False)
@@ -487,14 +500,34 @@ def _open_npz(path: Path):
     return data
 
 
-def _read_npz(path: Path) -> dict[str, np.ndarray]:
+def read_npz_arrays(path: str | Path, what: str = "npz archive") -> dict[str, np.ndarray]:
+    """Every array of the npz archive at ``path``, read in full (so that a damaged member is
+    found now, not when it is used).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is empty, cut short, not an npz archive, damaged (a checksum or an
+            array header that does not read) or holds a pickled object array; the message names
+            the file, ``what`` it should be and what is wrong.
+    """
+    path = Path(path).expanduser()
     if not path.is_file():
-        raise FileNotFoundError(f"no policy file {str(path)!r}")
+        raise FileNotFoundError(f"no {what} {str(path)!r}")
+    if path.stat().st_size == 0:
+        raise ValueError(f"{str(path)!r} is not a {what}: the file is empty")
     try:
         with _open_npz(path) as data:
             return {key: np.array(data[key]) for key in data.files}
-    except (ValueError, OSError, EOFError) as err:  # not an npz, or an object array (pickled)
-        raise ValueError(f"{str(path)!r} is not a policy file: {err}") from None
+    except _DAMAGED as err:
+        reason = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        raise ValueError(
+            f"{str(path)!r} is not a {what}: {reason} (it should be an npz archive of named "
+            "arrays, as numpy.savez writes; this file is damaged, cut short or of another kind)"
+        ) from None
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    return read_npz_arrays(path, "policy file")
 
 
 def load_policy_file(path: str | Path) -> PolicyFile:
@@ -518,7 +551,7 @@ def is_policy_file(path: str | Path) -> bool:
     try:
         with _open_npz(path) as data:
             return bool({"W", "W0"} & set(data.files))
-    except (ValueError, OSError, EOFError):
+    except _DAMAGED:
         return False
 
 

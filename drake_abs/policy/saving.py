@@ -43,6 +43,7 @@ from drake_abs._validation import as_finite_array
 from drake_abs.engine.protocols import Policy
 from drake_abs.policy.ars_v2 import NormalizedLinearPolicy
 from drake_abs.policy.policies import LinearPolicy, MLPPolicy
+from drake_abs.policy.policy_files import read_npz_arrays
 
 __all__ = [
     "FORMAT",
@@ -301,6 +302,24 @@ def _read_record(json_path: Path) -> dict:
     return record
 
 
+def _arrays_name(record: dict, json_path: Path) -> str:
+    """The record's ``arrays`` entry: the bare name of an ``.npz`` file beside the JSON (a path,
+    or a name that leaves the folder, is refused: a saved policy reads no other file)."""
+    name = record.get("arrays")
+    if (
+        not isinstance(name, str)
+        or not name.endswith(".npz")
+        or name in (".npz", "..npz")
+        or Path(name).name != name
+        or "\\" in name
+    ):
+        raise ValueError(
+            f"{str(json_path)!r}: 'arrays' must be the name of the .npz file beside it, such as "
+            f"{json_path.stem + '.npz'!r} (no folder); got {name!r}"
+        )
+    return name
+
+
 def _rebuild(record: dict, arrays, json_path: Path) -> Policy:
     kind = record.get("kind")
     cls = POLICY_KINDS.get(kind) if isinstance(kind, str) else None
@@ -346,25 +365,37 @@ def load_policy(
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: not a saved policy, an unknown kind (named), a theta of the wrong size, or
-            a task-observation policy without ``wrap``.
+        ValueError: not a saved policy, an unknown kind (named), an arrays file that is damaged
+            or not beside the JSON, an ``n_params`` that is not the policy's, a theta of the
+            wrong size, or a task-observation policy without ``wrap``.
     """
     json_path, _ = policy_paths(path)
     record = _read_record(json_path)
-    npz_path = json_path.parent / str(record.get("arrays", ""))
+    npz_path = json_path.parent / _arrays_name(record, json_path)
     if not npz_path.is_file():
         raise FileNotFoundError(
             f"{str(json_path)!r} names its arrays file {str(npz_path)!r}, which does not exist"
         )
-    with np.load(npz_path, allow_pickle=False) as arrays:
-        if "theta" not in arrays:
-            raise ValueError(f"{str(npz_path)!r} has no 'theta'")
-        theta = np.array(arrays["theta"], dtype=float)
-        inner = _rebuild(record, arrays, json_path)
+    arrays = read_npz_arrays(npz_path, "saved policy's arrays file")
+    if "theta" not in arrays:
+        raise ValueError(f"{str(npz_path)!r} has no 'theta'")
+    raw = arrays["theta"]
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(
+            f"{str(npz_path)!r}: theta must be an array of real numbers; got dtype {raw.dtype}"
+        )
+    theta = raw.astype(float)
+    inner = _rebuild(record, arrays, json_path)
     if theta.shape != (inner.n_params,) or not np.all(np.isfinite(theta)):
         raise ValueError(
             f"{str(npz_path)!r}: theta must be finite with shape ({inner.n_params},), the "
             f"{record['kind']}'s n_params; got {theta.shape}"
+        )
+    n_params = record.get("n_params")
+    if isinstance(n_params, bool) or not isinstance(n_params, int) or n_params != inner.n_params:
+        raise ValueError(
+            f"{str(json_path)!r}: n_params must be the {record['kind']}'s number of parameters, "
+            f"{inner.n_params}; the file says {n_params!r}"
         )
     task_name = record.get("task")
     acts_on = record.get("acts_on", "state")
