@@ -548,3 +548,43 @@ def test_output_paths_under_a_file_and_an_empty_address_are_usage_errors(
     ]:
         err = _usage_error(argv, capsys)
         assert f"argument {option}: " in err, (argv, err)
+
+
+# ============================================================================ inside the ground
+
+
+def test_a_state_inside_the_ground_is_refused_by_the_env(hopper_env):
+    """The Hopper 0.7 m below the ground used to be pushed up 1.21 m in one step, converged,
+    with the survive reward paid."""
+    hopper_env.reset(seed=0)
+    start = hopper_env.state
+    q, v = start[:6].copy(), start[6:].copy()
+    q[1] -= 0.74  # the foot's underside starts 4 cm above the ground
+    with pytest.raises(ValueError, match=r"the state \(q, v\) is 0.70\d* m inside the ground, "
+                                         r"deeper than the 0.01 m a step models"):  # fmt: skip
+        hopper_env.set_state(q, v)
+    np.testing.assert_array_equal(hopper_env.state, start)  # unchanged
+    q[1] = start[1] - 0.045  # 5 mm into the ground: within the tolerance, and reported
+    hopper_env.set_state(q, v)
+    *_, info = hopper_env.step(np.zeros(3))
+    assert "penetration" in info and 0.0 <= info["penetration"] <= 0.01
+
+
+def test_an_objective_refuses_an_initial_state_inside_the_ground(hopper, box_stepper):
+    x0 = hopper.x0.copy()
+    x0[1] -= 0.5
+    with pytest.raises(ValueError, match=r"x0 is 0.4\d* m inside the ground"):
+        PolicyObjective(hopper.stepper, hopper.policy(LinearPolicy(hopper.n_obs, hopper.nu)),
+                        hopper.reward, x0, 3)  # fmt: skip
+    reward = QuadraticReward(np.eye(4), np.eye(1), np.zeros(4))
+    with pytest.raises(ValueError, match=r"x0 is 0.05 m inside the ground"):
+        PolicyObjective(box_stepper, LinearPolicy(4, 1), reward, [0.0, 0.05, 0.0, 0.0], 3)
+
+
+def test_penetration_is_the_deepest_candidates_depth_on_any_scene(box_stepper):
+    """The falling box's contact point is 0.1 m below its centre."""
+    x = np.array([[0.0, 0.3, 0, 0], [0.0, 0.1, 0, 0], [0.0, 0.02, 0, 0]])
+    np.testing.assert_allclose(box_stepper.penetration(x), [0.0, 0.0, 0.08], atol=1e-12)
+    assert box_stepper.penetration(x[2]) == pytest.approx(0.08)
+    with pytest.raises(ValueError, match=r"x must have shape \(B, nq \+ nv\) = \(B, 4\)"):
+        box_stepper.penetration(np.zeros(3))

@@ -22,6 +22,42 @@ from drake_abs.contact.step import Step, contact_free_step
 from drake_abs.engine.protocols import Stepper
 
 
+def inside_ground(stepper, x) -> tuple[np.ndarray, float] | None:
+    """How deep (m) the states x (B, nx) are inside the ground, with the tolerance beyond
+    which a state is not one the step models: ``(depth (B,), tolerance)`` from the first
+    stepper, following wrappers' ``stepper`` attributes (:class:`ZeroOrderHold`,
+    :class:`~drake_abs.tasks.adapters.ActionScaled`), that has ``penetration(x)`` and
+    ``penetration_tolerance`` (a scene's
+    :class:`~drake_abs.multibody.stepper.ComplementarityStepper`); None when there is none (a
+    model without geometry, e.g. an LCS)."""
+    seen = 0
+    while stepper is not None and seen < 16:  # wrappers of wrappers; never a loop
+        measure = getattr(stepper, "penetration", None)
+        if callable(measure) and hasattr(stepper, "penetration_tolerance"):
+            depth = np.asarray(measure(np.atleast_2d(np.asarray(x, dtype=float))), dtype=float)
+            return depth, float(stepper.penetration_tolerance)
+        stepper, seen = getattr(stepper, "stepper", None), seen + 1
+    return None
+
+
+def refuse_inside_ground(stepper, x, name: str = "x0") -> None:
+    """``ValueError`` naming ``name`` when a state of x is deeper inside the ground than the
+    stepper's tolerance (see :func:`inside_ground`): the step would push the body out within
+    one step, with an impulse no scene produced, and report it converged."""
+    found = inside_ground(stepper, x)
+    if found is None:
+        return
+    depth, tol = found
+    if np.any(depth > tol):
+        row = int(np.argmax(depth))
+        where = "" if np.ndim(x) == 1 else f" (row {row})"
+        raise ValueError(
+            f"{name}{where} is {float(depth[row]):.4g} m inside the ground, deeper than the "
+            f"{tol:g} m a step models (drake_abs.multibody.stepper.PENETRATION_TOL): move the "
+            "body out of the ground"
+        )
+
+
 def _no_parameters(stepper, parameters: bool) -> None:
     if parameters:
         raise ValueError(f"parameters=True: {type(stepper).__name__} names no model parameters")

@@ -53,6 +53,14 @@ from drake_abs.multibody.parameters import (
 REPAIR_TOL = 1e-6
 MAX_REPAIRS = 3
 
+#: How deep (m) a state's contact candidate may be below its surface before the state counts as
+#: inside the ground: a hard-contact step ends at most a linearisation error (micrometres) below
+#: it, MuJoCo-like soft contact a few millimetres. A deeper state is not one the step models
+#: (the step pushes the body out in one step, with an impulse no scene produced), so
+#: :meth:`ComplementarityStepper.penetration` reports it and
+#: :class:`drake_abs.tasks.gym_env.DrakeAbsEnv` refuses to set it.
+PENETRATION_TOL = 0.01
+
 #: The options a stepper passes on to its contact solve (``**solver_options``): the
 #: interior-point solver's ``tol``, ``max_iterations`` and ``exact_tol``
 #: (:func:`drake_abs.solve_lcp`) and ``strict`` (raise instead of flagging an unconverged
@@ -360,6 +368,29 @@ class ComplementarityStepper:
         other._set_joint_terms(damping, springs)
         other._parameters = {**self._parameters, **changed}
         return other
+
+    #: see :data:`PENETRATION_TOL` (m)
+    penetration_tolerance: float = PENETRATION_TOL
+
+    def penetration(self, x) -> np.ndarray:
+        """How deep (m) each state of x (B, nq + nv) (or one state (nq + nv,)) is inside the
+        ground: the largest depth of a contact candidate below its surface (its signed distance
+        with the sign turned), 0 where none is below. (B,), or a float for one state. A depth
+        above :attr:`penetration_tolerance` is a state the step does not model."""
+        nq, nv, _, nc = self.sizes
+        arr = np.asarray(x, dtype=float)
+        single = arr.ndim == 1
+        arr = np.atleast_2d(arr)
+        if arr.ndim != 2 or arr.shape[1] != nq + nv:
+            raise ValueError(
+                f"x must have shape (B, nq + nv) = (B, {nq + nv}) or (nq + nv,); got {arr.shape}"
+            )
+        if not np.isfinite(arr).all():
+            raise ValueError("x must be finite")
+        depth = np.zeros(arr.shape[0])
+        if nc:
+            depth = np.maximum(0.0, -self.model.distances(arr[:, :nq]).min(axis=1))
+        return float(depth[0]) if single else depth
 
     @property
     def smoothing_parameter_names(self) -> tuple[str, ...]:

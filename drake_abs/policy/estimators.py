@@ -42,6 +42,7 @@ from drake_abs.contact.unconverged import (
 from drake_abs.engine import Policy, Reward, Stepper, Trajectory, rollout
 from drake_abs.engine.closed_loop import STEPPER_FORM
 from drake_abs.engine.protocols import check_protocol, check_reward
+from drake_abs.engine.steppers import refuse_inside_ground
 from drake_abs.policy.rollouts import (
     RolloutJob,
     RolloutStats,
@@ -95,6 +96,7 @@ class PolicyObjective:
                     f"reward and policy disagree on {size}: the reward's is {theirs}, the "
                     f"policy's {mine}"
                 )
+        refuse_inside_ground(self.stepper, x0, "x0")
         # a whole number of steps >= 1 (1.7, "5", True and NaN are refused, not truncated)
         object.__setattr__(self, "horizon", as_count(self.horizon, "horizon", minimum=1))
         object.__setattr__(self, "sigma", as_real_number(self.sigma, "sigma", minimum=0.0))

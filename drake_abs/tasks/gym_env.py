@@ -38,6 +38,7 @@ except ImportError as err:  # pragma: no cover - gymnasium is in the dev extra
     ) from err
 
 from drake_abs._validation import as_count, as_finite_array
+from drake_abs.engine.steppers import inside_ground, refuse_inside_ground
 from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
 
 __all__ = ["ENV_IDS", "DrakeAbsEnv", "TaskSteps", "register_envs", "step_task"]
@@ -68,7 +69,10 @@ class DrakeAbsEnv(gymnasium.Env):
     ``step`` returns gymnasium's ``info`` keys (``x_position``, ``x_velocity``,
     ``reward_forward``, ``reward_ctrl``, and for the Hopper ``reward_survive``,
     ``z_distance_from_origin``) plus ``converged``: whether the contact solver converged (a
-    False step's state is not exact).
+    False step's state is not exact), and ``penetration``: how deep (m) the new state is
+    inside the ground (0 when no contact candidate is below its surface; above the plant's
+    tolerance, :data:`drake_abs.multibody.stepper.PENETRATION_TOL`, the state is not one the
+    step models). ``reset``'s ``info`` has gymnasium's keys only.
     """
 
     metadata = {"render_modes": []}
@@ -100,12 +104,16 @@ class DrakeAbsEnv(gymnasium.Env):
         return self._x.copy()
 
     def set_state(self, q, v) -> None:
-        """Set the state to (q, v) (as MuJoCo environments' ``set_state(qpos, qvel)``)."""
+        """Set the state to (q, v) (as MuJoCo environments' ``set_state(qpos, qvel)``). A state
+        deeper inside the ground than the plant's tolerance
+        (:data:`drake_abs.multibody.stepper.PENETRATION_TOL`, 1 cm) is refused (``ValueError``
+        with its depth): the step would push the body out in one step and call it converged."""
         x = np.concatenate([as_finite_array(q, "q").ravel(), as_finite_array(v, "v").ravel()])
         if x.shape != self._x.shape:
             raise ValueError(
                 f"q and v must be finite with {self._x.size} entries in all; got {x.shape}"
             )
+        refuse_inside_ground(self.task.stepper, x, "the state (q, v)")
         self._x = x
 
     def _obs(self) -> np.ndarray:
@@ -148,7 +156,8 @@ class TaskSteps:
         terminated: (B,) bool, the task's termination at x_next (all False without one).
         converged: (B,) bool, whether the contact solve converged (a False row's x_next is the
             solver's last iterate: not exact, but finite).
-        info: gymnasium's ``info`` entries of the task (``task.info``), each (B,).
+        info: gymnasium's ``info`` entries of the task (``task.info``), each (B,), with
+            ``penetration`` (m, how deep x_next is inside the ground) where the plant tells.
     """
 
     x_next: np.ndarray
@@ -216,6 +225,10 @@ def step_task(task, x, u) -> TaskSteps:
         terminated = np.zeros(x.shape[0], dtype=bool)
     make = getattr(task, "info", None)
     info = {} if make is None else dict(make(x, u, x_next, *([step] if extra else [])))
+    if "penetration" not in info:  # a task that does not report it: from its plant
+        found = inside_ground(task.stepper, x_next)
+        if found is not None:
+            info["penetration"] = found[0]
     converged = np.asarray(step.converged, dtype=bool).reshape(x.shape[0])
     return TaskSteps(x_next, np.asarray(r, dtype=float), terminated, converged, info)
 

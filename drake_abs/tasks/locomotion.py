@@ -518,7 +518,9 @@ class LocomotionTask:
 
     def reset_info(self, x) -> dict[str, np.ndarray]:
         """gymnasium's ``info`` at states x (M, nx), each (M,): ``x_position`` (m) and, for the
-        Hopper, ``z_distance_from_origin`` (m, the height above the initial state's)."""
+        Hopper, ``z_distance_from_origin`` (m, the height above the initial state's): the keys
+        of gymnasium's reset ``info``, no more (the step's ``info`` adds ours:
+        :func:`drake_abs.tasks.gym_env.step_task`)."""
         x = _batch(x, "x", self.nx, "nx")
         if hasattr(self.reward, "position_info"):  # the Ant: x, y and distance
             return self.reward.position_info(x)
