@@ -39,6 +39,21 @@ def as_finite_array(value, name: str, *, ndim: tuple[int, ...] | None = None) ->
     return arr
 
 
+def check_counts(config, names: tuple[str, ...]) -> None:
+    """Raise ``ValueError`` naming the field unless each field ``names`` of ``config`` (e.g. an
+    experiment's Config) is a count: an integer >= 1, or for a tuple field a non-empty tuple of
+    integers >= 1 (e.g. sample sizes)."""
+    for name in names:
+        value = getattr(config, name)
+        if isinstance(value, tuple):
+            if not value:
+                raise ValueError(f"{name} must hold at least one whole number >= 1; got ()")
+            for i, item in enumerate(value):
+                as_count(item, f"{name}[{i}]", minimum=1)
+        else:
+            as_count(value, name, minimum=1)
+
+
 def as_real_number(value, name: str, *, minimum: float | None = None) -> float:
     """Return ``value`` as a ``float``, raising ``ValueError`` naming ``name`` unless it is a
     real number (int, float or a numpy real scalar; not a bool, a string or a complex number)

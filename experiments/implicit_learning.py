@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_abs._validation import as_count, check_counts
 from drake_abs.experiments.outputs import (
     file_list,
     progress,
@@ -77,6 +78,14 @@ class Config:
     bound_sizes: tuple[float, ...] = (1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10)
     delta: float = 0.05
     seed: int = 0
+
+    def __post_init__(self):
+        # an impossible count is refused here, before any work (a sweep point that ran with
+        # seeds=0 used to finish "done" with a NaN metric)
+        check_counts(self, ("landscape_points", "landscape_steps", "sizes", "seeds",
+                            "test_points", "descent_steps", "descent_points",
+                            "lipschitz_points"))  # fmt: skip
+        as_count(self.seed, "seed", minimum=0)
 
     @classmethod
     def test_size(cls) -> Config:

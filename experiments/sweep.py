@@ -174,7 +174,9 @@ def build_grid(
     (``KEY=V1,V2`` texts) for every one of ``seeds`` (None: the Config's own seed, no seed
     key), seed-major. Values are checked against the Config's fields; GridError names the
     option (``--seeds`` or ``--set``) of a bad one: an unknown field, a wrong type, a repeated
-    key or value, seeds for an experiment whose Config has no ``seed``."""
+    key or value, seeds for an experiment whose Config has no ``seed``, or a point whose
+    Config refuses its values (e.g. a count of 0: every point's Config is built here, before
+    any point runs)."""
     base = ExperimentPoint(experiment, test_size).base_config()
     parsed = [parse_setting(s, base) for s in settings]
     keys = [k for k, _ in parsed]
@@ -206,6 +208,14 @@ def build_grid(
             point = {} if seeds is None else {seed_key: seed}
             point.update(zip(keys, combo, strict=True))
             points.append(point)
+    for point in points:  # every point's Config is built (and checked) before any runs
+        try:
+            apply_overrides(base, point)
+        except (ValueError, TypeError) as err:
+            raise GridError(
+                "--set" if keys else "--seeds",
+                f"the point {point} is not a valid configuration: {err}",
+            ) from None
     return points
 
 

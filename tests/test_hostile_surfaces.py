@@ -588,3 +588,99 @@ def test_penetration_is_the_deepest_candidates_depth_on_any_scene(box_stepper):
     assert box_stepper.penetration(x[2]) == pytest.approx(0.08)
     with pytest.raises(ValueError, match=r"x must have shape \(B, nq \+ nv\) = \(B, 4\)"):
         box_stepper.penetration(np.zeros(3))
+
+
+# ================================================================================== sweeps
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        (["seeds=0,-1"], r"'seeds=0,-1': seeds: expected a whole number >= 0"),
+        (["seeds=0,2"], r"the point \{'seeds': 0\} is not a valid configuration: seeds must be "
+                        r"an integer >= 1; got 0"),
+        (["sizes=[10,0]"], r"sizes\[1\] must be an integer >= 1; got 0"),
+        (["test_points=-5"], r"test_points: expected a whole number >= 0"),
+    ],
+)  # fmt: skip
+def test_impossible_counts_are_refused_before_a_sweep_starts(settings, message, capsys,
+                                                             monkeypatch):  # fmt: skip
+    """seeds=0,-1 used to mark both points done with a NaN metric and exit 0."""
+    from drake_abs.experiments.sweep import GridError, build_grid
+
+    with pytest.raises(GridError, match=message):
+        build_grid("implicit-learning", settings=settings, test_size=True)
+    monkeypatch.setattr("drake_abs.parallel.sweep.run_sweep", lambda *a, **k: pytest.fail("ran"))
+    argv = ["sweep", "implicit-learning", "--test-size", "--no-progress"]
+    for setting in settings:
+        argv += ["--set", setting]
+    assert "argument --set: " in _usage_error(argv, capsys)
+
+
+def test_an_experiment_config_refuses_a_zero_count():
+    from drake_abs.experiments.implicit_learning import Config
+
+    with pytest.raises(ValueError, match=r"seeds must be an integer >= 1; got 0"):
+        Config(seeds=0)
+    with pytest.raises(ValueError, match=r"sizes must hold at least one whole number"):
+        Config(sizes=())
+
+
+def _records_folder(values: dict, folder: Path) -> dict:
+    """A point function: writes a file, notes its temporary folder, and for x == 1 is
+    interrupted as Ctrl-C interrupts it."""
+    (folder / "note.txt").write_text(f"{values['x']}\n")
+    (Path(values["log"]) / f"{values['x']}.folder").write_text(str(folder))
+    if values["x"] == 1:
+        raise KeyboardInterrupt
+    return {"square": values["x"] ** 2}
+
+
+def test_an_interrupted_point_leaves_no_temporary_folder(tmp_path):
+    from drake_abs.parallel.sweep_points import execute_point
+
+    with pytest.raises(KeyboardInterrupt):
+        execute_point(_records_folder, {"x": 1, "log": str(tmp_path)})
+    folder = Path((tmp_path / "1.folder").read_text())
+    assert folder.name.startswith("drake-abs-point-") and not folder.exists()
+    done = execute_point(_records_folder, {"x": 2, "log": str(tmp_path)})
+    assert done["status"] == "done" and not Path((tmp_path / "2.folder").read_text()).exists()
+
+
+def test_folders_left_by_killed_points_are_removed_at_the_next_start(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from drake_abs.parallel.sweep_points import TEMP_PREFIX, remove_stale_folders
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    dead = tmp_path / f"{TEMP_PREFIX}{int(gone.stdout)}-abc"
+    running = tmp_path / f"{TEMP_PREFIX}{os.getpid()}-def"
+    other = tmp_path / "someone-else"
+    for folder in (dead, running, other):
+        (folder / "sub").mkdir(parents=True)
+    assert remove_stale_folders(tmp_path) == [dead]
+    assert not dead.exists() and running.exists() and other.exists()
+
+
+def test_a_points_record_has_the_mode_of_its_other_files(tmp_path):
+    """point.json was written 0600 (through mkstemp) while the point's files were 0644."""
+    from drake_abs.parallel.sweep import run_sweep
+
+    result = run_sweep(_records_folder, [{"x": 2, "log": str(tmp_path)}], tmp_path / "out",
+                       progress=False)  # fmt: skip
+    (point,) = result.points
+    modes = {p.name: p.stat().st_mode & 0o777 for p in point.folder.iterdir()}
+    assert modes["point.json"] == modes["note.txt"] == 0o666 & ~_umask(), modes
+    gathered = {p.name: p.stat().st_mode & 0o777 for p in (tmp_path / "out").iterdir()}
+    assert gathered["sweep.json"] == modes["note.txt"], gathered
+
+
+def _umask() -> int:
+    import os
+
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask

@@ -7,7 +7,10 @@ otherwise the type of its default value. Conversions: an int to a float field; a
 (``10.0``) or a numeric text to an int field; a numeric text (``"1e-4"``, which YAML reads as
 text) to a float field; a list to a tuple field (items converted the same way) and a single item
 to a one-item tuple. Booleans are only ``true``/``false``: never a number, never a number's
-field. Anything else is a ValueError that names the field and the type it expects.
+field. A whole-number setting is never negative (every one is a count, a size, a number of steps
+or a seed). Anything else is a ValueError that names the field and the type it expects. A
+Config's own checks (its ``__post_init__``, e.g. counts that must be >= 1) run when the values
+are applied (:func:`apply_overrides`), which a sweep does for every point before any runs.
 """
 
 from __future__ import annotations
@@ -91,16 +94,24 @@ def coerce(name: str, value: Any, spec: Any) -> Any:
     if isinstance(value, bool) and spec in (int, float, str):
         raise bad
     if spec is int:
+        negative = ValueError(
+            f"{name}: expected a whole number >= 0 (counts, sizes, steps and seeds are never "
+            f"negative), got {value!r}"
+        )
         if isinstance(value, Integral):
-            return int(value)
-        if isinstance(value, Real) and float(value).is_integer():
-            return int(value)
-        if isinstance(value, str):
+            number = int(value)
+        elif isinstance(value, Real) and float(value).is_integer():
+            number = int(value)
+        elif isinstance(value, str):
             try:
-                return int(value.strip(), 10)
+                number = int(value.strip(), 10)
             except ValueError:
                 raise bad from None
-        raise bad
+        else:
+            raise bad
+        if number < 0:
+            raise negative
+        return number
     if spec is float:
         if isinstance(value, Real):
             return float(value)

@@ -42,6 +42,7 @@ from drake_abs.parallel.sweep_points import (
     lost_point,
     point_names,
     read_point,
+    remove_stale_folders,
     store_point,
 )
 
@@ -200,6 +201,7 @@ def run_sweep(
         if value is not None and (not isinstance(value, str) or not value):
             raise ValueError(f"{arg} must be a column name (a non-empty str); got {value!r}")
     points = validate_points(points)
+    remove_stale_folders()  # temporary folders of points whose sweep was killed
     names = point_names(points)
     description = describe(fn)
     (out / "points").mkdir(parents=True, exist_ok=True)

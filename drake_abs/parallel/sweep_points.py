@@ -13,6 +13,10 @@ on whichever machine executes it; it returns the summary (JSON-safe) and the byt
 what the driver does with that: it writes the files into ``out/points/<name>/`` (paths that named
 the temporary folder, in the summary and in text files, are rewritten to name that folder) and
 ``point.json`` last, atomically, so a ``point.json`` that says ``done`` means every file is there.
+
+A point's temporary folder is removed when it ends, also when it is interrupted (Ctrl-C); one
+left by a process that was killed is removed when the next sweep starts
+(:func:`remove_stale_folders`).
 """
 
 from __future__ import annotations
@@ -162,7 +166,7 @@ def execute_point(fn: Callable[[dict, Path], Mapping], values: Mapping[str, Any]
     bytes, every file ``fn`` wrote, also when it raised), ``temp_folders`` (the folder's paths,
     to be rewritten) and ``host``. An exception from ``fn`` is caught here; only the death of
     the process itself escapes."""
-    raw = tempfile.mkdtemp(prefix=TEMP_PREFIX)
+    raw = tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}{os.getpid()}-")
     folder = Path(raw).resolve()
     start = time.perf_counter()
     try:
@@ -174,6 +178,9 @@ def execute_point(fn: Callable[[dict, Path], Mapping], values: Mapping[str, Any]
         result: dict[str, Any] = {"status": "done", "summary": jsonable(summary)}
     except Exception as err:
         result = {"status": "failed", "error": error_record(err, traceback.format_exc())}
+    except BaseException:  # interrupted (Ctrl-C, a Ray cancel): the folder goes, then it stops
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
     result["seconds"] = time.perf_counter() - start
     try:
         result["files"] = {
@@ -186,6 +193,33 @@ def execute_point(fn: Callable[[dict, Path], Mapping], values: Mapping[str, Any]
     result["temp_folders"] = sorted({raw, str(folder)}, key=len, reverse=True)
     result["host"] = socket.gethostname()
     return result
+
+
+def remove_stale_folders(root: str | Path | None = None) -> list[Path]:
+    """Remove the temporary folders of points whose process is gone (a sweep killed while a
+    point ran: ``kill -9``, a lost Ray worker) from ``root`` (default: the system's temporary
+    folder) and return them. A point's folder is named ``drake-abs-point-<pid>-...`` by the
+    process that runs it; folders of running processes (other sweeps) are left alone."""
+    root = Path(tempfile.gettempdir() if root is None else root)
+    removed = []
+    for folder in root.glob(f"{TEMP_PREFIX}*"):
+        pid = folder.name[len(TEMP_PREFIX) :].split("-", 1)[0]
+        if not pid.isdigit() or not folder.is_dir() or _alive(int(pid)):
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        removed.append(folder)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs on this machine (one of another user counts as running)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
 
 
 def error_record(err: BaseException, trace: str) -> dict[str, str]:
@@ -232,12 +266,29 @@ def write_atomically(path: Path, data: bytes | str) -> None:
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        # mkstemp makes the file 0600; give it the mode a plain write would (0644 under the
+        # usual umask 022), as the point's other files have
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:
             f.write(data.encode() if isinstance(data, str) else data)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    """This process's umask (read from /proc where there is one, which leaves it unchanged;
+    else set and restored)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def store_point(
