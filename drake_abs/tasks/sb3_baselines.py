@@ -354,8 +354,8 @@ class TrainingLog:
 
     @property
     def seconds(self) -> float:
-        """Wall time clocked while training (s): from :meth:`start_clock`, without the spans
-        between a :meth:`stop_clock` and the next start."""
+        """Seconds of wall time clocked while training (from :meth:`start_clock`, without the
+        spans between a :meth:`stop_clock` and the next start)."""
         running = 0.0 if self._start is None else time.perf_counter() - self._start
         return self._elapsed + running
 
@@ -531,8 +531,8 @@ class Sb3Trainer:
     what :func:`train_baseline` runs to a budget, and what a resumable experiment checkpoints.
 
     Args:
-        task_name, algorithm, seed, env_options, algorithm_options, log_every,
-            max_episode_steps, n_envs: as :func:`train_baseline`.
+        task_name: as :func:`train_baseline` (also ``algorithm``, ``seed``, ``env_options``,
+            ``algorithm_options``, ``log_every``, ``max_episode_steps``, ``n_envs``).
         chunk: environment steps of one :meth:`iterate` (at least; the library's
             ``learn(chunk)``: PPO rounds up to whole rollouts of ``n_steps * n_envs``, ARS to
             whole iterations, SAC to a multiple of ``n_envs``). None: one rollout (PPO), one
