@@ -590,6 +590,35 @@ def test_penetration_is_the_deepest_candidates_depth_on_any_scene(box_stepper):
         box_stepper.penetration(np.zeros(3))
 
 
+def test_a_soft_contact_plant_accepts_its_resting_depth_and_refuses_deeper():
+    """MuJoCo-like soft contact rests inside the ground by design (MuJoCo's HalfCheetah 13 to
+    17 mm deep): 2 cm is refused with hard contact, kept with soft; 8 cm is refused by both."""
+    from drake_abs.engine.steppers import refuse_inside_ground
+    from drake_abs.multibody.builder import build_scene_model
+    from drake_abs.multibody.scene import Scene
+    from drake_abs.multibody.stepper import PENETRATION_TOL, SOFT_PENETRATION_TOL
+
+    pytest.importorskip("gymnasium")
+    hard_scene = Scene.load("gym_half_cheetah")
+    soft_scene = Scene.from_dict(
+        {**hard_scene.to_dict(), "compliance": {"kind": "mujoco", "from_model": True}}
+    )
+    hard, soft = build_scene_model(hard_scene), build_scene_model(soft_scene)
+    assert hard.stepper().penetration_tolerance == PENETRATION_TOL == 0.01
+    assert soft.stepper().penetration_tolerance == SOFT_PENETRATION_TOL == 0.05
+    x = hard.x0.copy()
+    lowest = hard.contact_model.distances(x[None, : hard.plant.num_positions()]).min()
+    for depth, soft_ok in ((0.02, True), (0.08, False)):
+        x[1] = hard.x0[1] - lowest - depth  # the lowest candidate `depth` m deep
+        with pytest.raises(ValueError, match="inside the ground, deeper than the 0.01 m"):
+            refuse_inside_ground(hard.stepper(), x)
+        if soft_ok:
+            refuse_inside_ground(soft.stepper(), x)
+        else:
+            with pytest.raises(ValueError, match="deeper than the 0.05 m"):
+                refuse_inside_ground(soft.stepper(), x)
+
+
 # ================================================================================== sweeps
 
 

@@ -53,7 +53,7 @@ def refuse_inside_ground(stepper, x, name: str = "x0") -> None:
         where = "" if np.ndim(x) == 1 else f" (row {row})"
         raise ValueError(
             f"{name}{where} is {float(depth[row]):.4g} m inside the ground, deeper than the "
-            f"{tol:g} m a step models (drake_abs.multibody.stepper.PENETRATION_TOL): move the "
+            f"{tol:g} m a step models (the stepper's penetration_tolerance): move the "
             "body out of the ground"
         )
 

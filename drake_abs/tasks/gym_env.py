@@ -106,7 +106,8 @@ class DrakeAbsEnv(gymnasium.Env):
     def set_state(self, q, v) -> None:
         """Set the state to (q, v) (as MuJoCo environments' ``set_state(qpos, qvel)``). A state
         deeper inside the ground than the plant's tolerance
-        (:data:`drake_abs.multibody.stepper.PENETRATION_TOL`, 1 cm) is refused (``ValueError``
+        (the stepper's ``penetration_tolerance``: 1 cm with hard contact, 5 cm with soft,
+        :data:`drake_abs.multibody.stepper.PENETRATION_TOL`) is refused (``ValueError``
         with its depth): the step would push the body out in one step and call it converged."""
         x = np.concatenate([as_finite_array(q, "q").ravel(), as_finite_array(v, "v").ravel()])
         if x.shape != self._x.shape:
