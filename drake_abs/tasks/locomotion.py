@@ -65,6 +65,7 @@ from drake_abs.tasks.ant import AntObservation, AntReward
 from drake_abs.tasks.free_body import FreeBodyCoordinates
 
 __all__ = [
+    "CONTACT_LAWS",
     "GymLocomotionReward",
     "HealthyRanges",
     "LocomotionObservation",
@@ -547,6 +548,8 @@ class _TaskSpec:
     reset_noise: ResetNoise
     report_z: bool
     control_period: float  # gymnasium's: frame_skip x the model file's timestep (s)
+    #: the scene's ``compliance`` entry for MuJoCo's soft contact (``contact="mujoco"``)
+    soft_contact: tuple = (("kind", "mujoco"), ("from_model", True))
 
 
 #: The tasks :func:`locomotion_task` builds, by name: scene, gymnasium id, v5 settings.
@@ -575,8 +578,15 @@ TASKS: dict[str, _TaskSpec] = {
         ResetNoise(0.1, "normal", FreeBodyCoordinates(8)),
         False,
         5 * 0.01,
+        # the file sets no solref or solimp (MuJoCo's defaults, this option's too); the
+        # scene's radii hold its 0.01 m margin already (scenes/gym_ant.yaml), and Drake's
+        # names of its unnamed bodies cannot be looked up in the file (from_model)
+        (("kind", "mujoco"), ("margin", 0.0)),
     ),  # fmt: skip
 }
+
+#: The contact laws :func:`locomotion_task` offers.
+CONTACT_LAWS = ("hard", "mujoco")
 
 
 #: The settings of the scene's stepper that :func:`locomotion_task` passes on
@@ -591,6 +601,7 @@ def locomotion_task(
     reward_options=None,
     control_period: float | None = None,
     substeps: int | None = None,
+    contact: Literal["hard", "mujoco"] = "hard",
     **stepper,
 ) -> LocomotionTask:
     """gymnasium's ``Hopper-v5``, ``HalfCheetah-v5``, ``Walker2d-v5`` or ``Ant-v5`` on our
@@ -607,6 +618,10 @@ def locomotion_task(
             50 ms HalfCheetah and Ant).
         substeps: plant steps per action (default: the fewest that keep the plant's step at or
             below the scene's ``time_step``). More substeps: more accurate, slower.
+        contact: ``"hard"`` (the scene's complementarity contact) or ``"mujoco"``: MuJoCo's
+            soft contact from the model file's solref, solimp and margins, as a regularised
+            complementarity problem (the scene's ``compliance: {kind: mujoco, from_model:
+            true}``; see :mod:`drake_abs.contact.compliance`). Smoothing applies on top.
         stepper: other settings of the scene's stepper
             (:meth:`drake_abs.multibody.builder.SceneModel.stepper`).
     """
@@ -621,12 +636,16 @@ def locomotion_task(
     if unknown:
         raise ValueError(
             f"unknown option(s) {unknown} of locomotion_task({name!r}): it takes smoothing, "
-            "reward_options, control_period, substeps and the stepper's "
+            "reward_options, control_period, substeps, contact and the stepper's "
             f"{', '.join(STEPPER_SETTINGS + SOLVER_OPTIONS)}"
         )
 
+    if contact not in CONTACT_LAWS:
+        raise ValueError(f"contact must be one of {list(CONTACT_LAWS)}; got {contact!r}")
     spec = TASKS[name]
     scene = Scene.load(spec.scene)
+    if contact == "mujoco":
+        scene = Scene.from_dict({**scene.to_dict(), "compliance": dict(spec.soft_contact)})
     dt = spec.control_period if control_period is None else control_period
     real = isinstance(dt, int | float | np.integer | np.floating) and not isinstance(dt, bool)
     if not (real and np.isfinite(dt) and dt > 0):

@@ -47,6 +47,7 @@ from drake_abs.policy.methods import method as registry_method
 from drake_abs.policy.policy_files import PolicyFile
 from drake_abs.policy.shac import ShacConfig, ShacTrainer
 from drake_abs.tasks.locomotion import (
+    CONTACT_LAWS,
     TASKS,
     GymLocomotionReward,
     HealthyRanges,
@@ -115,6 +116,10 @@ class RunSettings:
             ``fopg_episode``, replace ``window``, ``critic`` and ``gamma``).
         control_period: seconds per action; None: gymnasium's.
         substeps: plant steps per action; None: the task's default.
+        contact: the contact law every method trains on: ``"hard"`` (complementarity) or
+            ``"mujoco"`` (MuJoCo's soft contact, :func:`~drake_abs.tasks.locomotion.
+            locomotion_task`'s ``contact``); the score in MuJoCo and on our exact plant is the
+            same either way.
         ars: ARS's settings; None: the published ones of the task.
         sb3_envs: environments the library baselines PPO and SAC step together (their
             hyperparameters adapted to keep the data per update,
@@ -131,6 +136,7 @@ class RunSettings:
     shac: ShacConfig = field(default_factory=ShacConfig)
     control_period: float | None = None
     substeps: int | None = None
+    contact: Literal["hard", "mujoco"] = "hard"
     ars: ArsConfig | None = None
     sb3_envs: int = 16
     sb3_chunk: int = 10_000
@@ -146,6 +152,8 @@ class RunSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a whole number >= 1; got {value!r}")
+        if self.contact not in CONTACT_LAWS:
+            raise ValueError(f"contact must be one of {list(CONTACT_LAWS)}; got {self.contact!r}")
         if len(self.contact_aware) != 2 or len(self.survive_width) != 2:
             raise ValueError(
                 "contact_aware must be (mu_max, length) and survive_width (height, pitch); got "
@@ -159,7 +167,8 @@ class RunSettings:
         else."""
         m = registry_method(method)
         values = asdict(self)
-        plant = {"control_period": self.control_period, "substeps": self.substeps}
+        plant = {"control_period": self.control_period, "substeps": self.substeps,
+                 "contact": self.contact}  # fmt: skip
         if m.estimator == "ars":
             return plant | {"ars": values["ars"]}
         if m.estimator == "sb3":
@@ -185,6 +194,7 @@ def training_task(task_name: str, method: str, settings: RunSettings) -> Locomot
     return locomotion_task(
         task_name, smoothing=smoothing, gradient=m.gradient, reward_options=reward_options,
         control_period=settings.control_period, substeps=settings.substeps,
+        contact=settings.contact,
     )  # fmt: skip
 
 
@@ -276,7 +286,8 @@ class ArsRun(TrainerRun):
             raise ValueError(f"method must be an ARS method; got {method!r}")
         self.task_name, self.method, self.seed, self.settings = task_name, method, seed, settings
         self.task = locomotion_task(task_name, control_period=settings.control_period,
-                                    substeps=settings.substeps)  # fmt: skip
+                                    substeps=settings.substeps,
+                                    contact=settings.contact)  # fmt: skip
         config = settings.ars or ArsConfig.published(self.task.env_id)
         self.trainer = ArsTrainer(self.task, config, seed)
 
@@ -303,7 +314,8 @@ class Sb3Run:
 
         algorithm = {key: algo for algo, key in METHOD_KEYS.items()}[method]
         self.task_name, self.method, self.seed, self.settings = task_name, method, seed, settings
-        env_options = {"control_period": settings.control_period, "substeps": settings.substeps}
+        env_options = {"control_period": settings.control_period, "substeps": settings.substeps,
+                       "contact": settings.contact}  # fmt: skip
         self.trainer = Sb3Trainer(
             task_name, algorithm, seed, env_options=env_options,
             n_envs=1 if algorithm == "ars" else settings.sb3_envs, chunk=settings.sb3_chunk,

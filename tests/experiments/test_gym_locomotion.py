@@ -105,6 +105,11 @@ def test_a_run_is_defined_by_the_settings_its_trainer_reads():
     assert g.run_identity(cfg, "hopper", "ars", 0) != g.run_identity(cfg, "hopper", "ars", 1)
     assert g.run_identity(cfg, "hopper", "ars", 0)["scene"] == g.scene_fingerprint("hopper")
     assert g.scene_fingerprint("hopper") != g.scene_fingerprint("walker2d")
+    soft = replace(cfg, settings=replace(cfg.settings, contact="mujoco"))
+    for method in ("shac_abs", "ars", "sb3_ppo"):  # every trainer reads the contact law
+        assert g.run_identity(cfg, "hopper", method, 0) != g.run_identity(soft, "hopper", method, 0)
+    with pytest.raises(ValueError, match="contact must be one of"):
+        replace(cfg.settings, contact="soft")
     more = replace(cfg, settings=replace(cfg.settings, sb3_envs=4))
     assert g.run_identity(cfg, "hopper", "shac_abs", 0) == g.run_identity(
         more, "hopper", "shac_abs", 0

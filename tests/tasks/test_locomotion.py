@@ -423,6 +423,7 @@ def test_smooth_survive_reward_has_its_gradient_and_keeps_gymnasiums_termination
         ({"control_period": "fast"}, "control_period must be a finite number > 0"),
         ({"substeps": 0}, "substeps"),
         ({"substeps": 1.5}, "substeps"),
+        ({"contact": "soft"}, r"contact must be one of \['hard', 'mujoco'\]"),
     ],
 )
 def test_bad_control_periods_and_substeps_are_named(options, says):
@@ -434,3 +435,23 @@ def test_substeps_split_the_control_period():
     task = locomotion_task("half_cheetah", substeps=2)
     assert task.dt == pytest.approx(0.05) and task.substeps == 2
     assert task.plant.model.h == pytest.approx(0.025)
+
+
+@pytest.mark.parametrize("name", ["hopper", "ant"])
+def test_mujocos_soft_contact_is_a_task_option(name):
+    """contact="mujoco": the scene's soft-contact option (the file's solref and solimp; the Ant
+    without a second margin, its radii hold it). A body resting on it sinks into the ground, as
+    in MuJoCo, where the hard plant keeps it on the surface."""
+    from drake_abs.multibody.stepper import SOFT_PENETRATION_TOL
+
+    hard, soft = locomotion_task(name), locomotion_task(name, contact="mujoco")
+    assert hard.plant.compliance is None and soft.plant.compliance is not None
+    assert soft.plant.penetration_tolerance == SOFT_PENETRATION_TOL
+    if name == "ant":
+        assert np.all(soft.plant.compliance.margin == 0.0)
+    x = x_hard = soft.x0[None]
+    for _ in range(60):  # 0.5 s (Hopper) to 3 s (Ant) of zero action: fallen or settled
+        x_hard = hard.stepper.step(x_hard, np.zeros((1, hard.nu))).x_next
+        x = soft.stepper.step(x, np.zeros((1, soft.nu))).x_next
+    assert soft.plant.penetration(x)[0] > 1e-4  # soft: resting inside the ground
+    assert hard.plant.penetration(x_hard)[0] < 1e-6  # hard: on it
