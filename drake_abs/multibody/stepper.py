@@ -54,9 +54,10 @@ REPAIR_TOL = 1e-6
 MAX_REPAIRS = 3
 
 #: How deep (m) a state's contact candidate may be below its surface before the state counts as
-#: inside the ground: a hard-contact step ends at most a linearisation error (micrometres) below
-#: it, MuJoCo-like soft contact a few millimetres. A deeper state is not one the step models
-#: (the step pushes the body out in one step, with an impulse no scene produced), so
+#: inside the ground, with hard contact: a hard-contact step ends at most a linearisation error
+#: (micrometres) below it (soft contact: :data:`SOFT_PENETRATION_TOL`). A deeper state is not
+#: one the step models (the step pushes the body out in one step, with an impulse no scene
+#: produced), so
 #: :meth:`ComplementarityStepper.penetration` reports it and
 #: :class:`drake_abs.tasks.gym_env.DrakeAbsEnv` refuses to set it.
 PENETRATION_TOL = 0.01
