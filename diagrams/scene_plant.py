@@ -18,7 +18,7 @@ from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_abs.contact.unconverged import OnUnconverged
-from drake_abs.multibody.builder import build_scene_model
+from drake_abs.multibody.builder import build_scene_model, check_stepper_keywords
 from drake_abs.multibody.scene import Scene
 from drake_abs.systems import ComplementarityPlant
 
@@ -42,13 +42,18 @@ def AddComplementarityPlantSceneGraph(
         plant_name, scene_graph_name: the systems' names in the diagram.
         stepper_options: passed to :meth:`~drake_abs.multibody.builder.SceneModel.stepper`
             (``smoothing``, ``gradient``, ``activation_distance``, ``friction``, ...), overriding
-            the scene's settings.
+            the scene's settings. Any other name is refused here, before the plant is built
+            (``ValueError``); a scene setting such as ``time_step`` is changed in the scene:
+            ``Scene.from_dict({**Scene.load("box_push").to_dict(), "time_step": 0.001})``.
 
     The plant's initial state in a new Context is the scene's (``initial_state``, else the
     model files' default).
     """
     if not isinstance(builder, DiagramBuilder):
         raise ValueError(f"builder must be a DiagramBuilder; got {type(builder).__name__}")
+    if not isinstance(scene, Scene):
+        scene = Scene.load(scene)
+    check_stepper_keywords(stepper_options, scene, "AddComplementarityPlantSceneGraph")
     model = build_scene_model(scene)
     scene_graph = builder.AddNamedSystem(scene_graph_name, SceneGraph())
     plant = ComplementarityPlant(

@@ -18,9 +18,11 @@ Run ``python -m drake_abs.multibody.builder SCENE...`` to print what a scene's p
 
 from __future__ import annotations
 
+import difflib
 import functools
 import sys
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -41,9 +43,64 @@ from drake_abs.multibody.geometry_contacts import PairContact
 from drake_abs.multibody.model_files import format_model_report, model_report, read_mjcf
 from drake_abs.multibody.parsing import add_model_specs, resolve_model_file
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
-from drake_abs.multibody.scene import Scene
+from drake_abs.multibody.scene import Scene, shipped_scenes
 from drake_abs.multibody.scene_compliance import scene_compliance
-from drake_abs.multibody.stepper import ComplementarityStepper
+from drake_abs.multibody.stepper import SOLVER_OPTIONS, ComplementarityStepper
+
+#: The keyword arguments :meth:`SceneModel.stepper` accepts: its own overrides of the scene's
+#: settings, the switches of :class:`ComplementarityStepper` and the solver's options.
+STEPPER_KEYWORDS = (
+    "smoothing", "activation_distance", "gradient", "friction",
+    "joint_limits", "damping", "springs", "joint_friction", *SOLVER_OPTIONS,
+)  # fmt: skip
+
+#: A scene setting that a stepper keyword overrides under another name.
+_SCENE_SETTING_KEYWORD = {"friction_model": "friction"}
+
+
+def check_stepper_keywords(options: Mapping, scene: Scene, caller: str) -> None:
+    """Refuse, when a stepper or a plant is built, a keyword argument that a stepper does not
+    take. A setting that belongs to the scene (``time_step``, ``ground_height``, ...: a
+    :class:`Scene` key) is named as such, with how to change it there; any other unknown name
+    gets the list of the accepted ones (and the closest of them).
+
+    Args:
+        options: the keyword arguments given (only their names are checked here; the stepper
+            checks the values).
+        scene: the scene the stepper is built from (named in the message).
+        caller: the function the keywords were given to, which starts the message.
+
+    Raises:
+        ValueError: naming the first bad keyword and where the setting belongs.
+    """
+    unknown = [name for name in options if name not in STEPPER_KEYWORDS]
+    if not unknown:
+        return
+    scene_keys = {f.name for f in fields(Scene)}
+    for name in unknown:
+        if name not in scene_keys:
+            continue
+        value = options[name]
+        shipped = scene.name in shipped_scenes() and Scene.load(scene.name) == scene
+        source = f"Scene.load({scene.name!r}).to_dict()" if shipped else "scene.to_dict()"
+        how = f"Scene.from_dict({{**{source}, {name!r}: {value!r}}})"
+        instead = _SCENE_SETTING_KEYWORD.get(name)
+        also = f" (or override it with the keyword argument {instead}=...)" if instead else ""
+        raise ValueError(
+            f"{caller}: {name}={value!r} is not a stepper option: {name} is a setting of the "
+            f"scene {scene.name!r} (its YAML key {name!r}); build from a scene with it "
+            f"changed, e.g. {how}{also}"
+        )
+    hints = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, STEPPER_KEYWORDS, n=1)
+        if close:
+            hints.append(f"{name!r}: did you mean {close[0]!r}?")
+    hint = f" ({'; '.join(hints)})" if hints else ""
+    raise ValueError(
+        f"{caller}: unknown stepper option(s) {sorted(unknown)}{hint}; the keyword arguments "
+        f"are {', '.join(STEPPER_KEYWORDS)}, and the scene's settings are changed in the scene"
+    )
 
 
 @dataclass(frozen=True)
@@ -99,8 +156,13 @@ class SceneModel:
             gradient: ``"frozen"`` or ``"total"`` (see :class:`ComplementarityStepper`).
             friction: replaces the scene's friction formulation (``"stewart_trinkle"`` or
                 ``"anitescu"``).
-            solver_options: passed to the interior-point solver.
+            solver_options: the switches of :class:`ComplementarityStepper`
+                (``joint_limits``, ``damping``, ``springs``, ``joint_friction``) and the
+                interior-point solver's options (``tol``, ``max_iterations``, ``exact_tol``,
+                ``strict``). Any other name is refused here (:func:`check_stepper_keywords`);
+                a scene setting such as ``time_step`` is changed in the scene.
         """
+        check_stepper_keywords(solver_options, self.scene, "SceneModel.stepper")
         stepper = ComplementarityStepper(
             self.contact_model,
             self.scene.make_smoothing() if smoothing is None else smoothing,
@@ -187,7 +249,11 @@ def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
 def make_stepper(scene: Scene | str | Path, **overrides) -> ComplementarityStepper:
     """The batched step of ``scene`` (a :class:`Scene`, a shipped scene's name such as
     ``"box_push"``, or a YAML path) with every scene setting applied; keyword arguments override
-    a setting explicitly (see :meth:`SceneModel.stepper`)."""
+    a setting explicitly (see :meth:`SceneModel.stepper`; a name it does not take is refused
+    before the plant is built)."""
+    if not isinstance(scene, Scene):
+        scene = Scene.load(scene)
+    check_stepper_keywords(overrides, scene, "make_stepper")
     return build_scene_model(scene).stepper(**overrides)
 
 
