@@ -25,6 +25,10 @@ experiments and the CLI in :mod:`drake_abs.experiments`. The names below are the
 Direction of smoothing, everywhere in this package: **a larger mu means more smoothing**;
 ``mu = 0`` is hard contact.
 
+gymnasium: when it is installed, importing this package registers the locomotion tasks'
+environments (``gymnasium.make("drake_abs/Hopper-v0")``; :mod:`drake_abs.tasks.gym_registration`),
+and ``gymnasium.make("drake_abs:drake_abs/Hopper-v0")`` works with no import of this package.
+
 Threads: the core solves many small dense systems, where a multi-threaded BLAS only adds
 overhead and, on a machine whose cores are busy, stalls badly (measured here: a 128 x 128
 inverse took 150 ms with two OpenBLAS threads on two shared cores, 1 ms with one). Importing
@@ -77,7 +81,12 @@ from drake_abs.lcp import (
     softened_lcp_1d,
     solve_lcp,
 )
+from drake_abs.tasks.gym_registration import register_if_installed as _register_gym_envs
 from drake_abs.tasks.point_mass import point_mass_lcs
+
+# gymnasium.make("drake_abs/Hopper-v0") after this import, with no call (gymnasium 1.x loads no
+# plugins; the ids are registered with string entry points: no Drake import here)
+_register_gym_envs()
 
 __all__ = [
     "LCS",

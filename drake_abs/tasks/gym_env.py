@@ -16,8 +16,10 @@ gymnasium's).
 :func:`step_task` is that step for a batch of B environments in one call of the stepper (what
 :class:`DrakeAbsEnv` runs with B = 1, and :mod:`drake_abs.tasks.sb3_vec_env` with B = n_envs).
 
-:func:`register_envs` registers ``drake_abs/Hopper-v0`` and ``drake_abs/HalfCheetah-v0`` for
-``gymnasium.make``.
+The gymnasium ids ``drake_abs/Hopper-v0``, ``drake_abs/HalfCheetah-v0``, ``drake_abs/Walker2d-v0``
+and ``drake_abs/Ant-v0`` make this environment; ``import drake_abs`` registers them
+(:mod:`drake_abs.tasks.gym_registration`, whose :func:`register_envs` and :data:`ENV_IDS` this
+module re-exports).
 
 Needs gymnasium (``pip install 'drake-abs[dev]'``); the rest of :mod:`drake_abs.tasks` does not.
 """
@@ -39,17 +41,10 @@ except ImportError as err:  # pragma: no cover - gymnasium is in the dev extra
 
 from drake_abs._validation import as_count, as_finite_array
 from drake_abs.engine.steppers import inside_ground, refuse_inside_ground
+from drake_abs.tasks.gym_registration import ENV_IDS, register_envs
 from drake_abs.tasks.locomotion import LocomotionTask, locomotion_task
 
 __all__ = ["ENV_IDS", "DrakeAbsEnv", "TaskSteps", "register_envs", "step_task"]
-
-#: gymnasium ids registered by :func:`register_envs` -> task name.
-ENV_IDS = {
-    "drake_abs/Hopper-v0": "hopper",
-    "drake_abs/HalfCheetah-v0": "half_cheetah",
-    "drake_abs/Walker2d-v0": "walker2d",
-    "drake_abs/Ant-v0": "ant",
-}
 
 
 class DrakeAbsEnv(gymnasium.Env):
@@ -232,15 +227,3 @@ def step_task(task, x, u) -> TaskSteps:
             info["penetration"] = found[0]
     converged = np.asarray(step.converged, dtype=bool).reshape(x.shape[0])
     return TaskSteps(x_next, np.asarray(r, dtype=float), terminated, converged, info)
-
-
-def register_envs() -> None:
-    """Register :data:`ENV_IDS` with gymnasium (``gymnasium.make("drake_abs/Hopper-v0")``, a
-    ``TimeLimit`` of 1000 steps); registering again is harmless."""
-    for env_id, name in ENV_IDS.items():
-        if env_id in gymnasium.registry:
-            continue
-        gymnasium.register(
-            env_id, entry_point=f"{__name__}:DrakeAbsEnv", max_episode_steps=1000,
-            kwargs={"task": name, "max_episode_steps": None},
-        )  # fmt: skip
