@@ -8,6 +8,8 @@ Usage::
     drake-abs experiment --list
     drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
                     [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
+    drake-abs train TASK --method M [--steps N] [--seed S] [--out DIR] [--set KEY=VALUE ...]
+                    [--no-progress]
     drake-abs record SCENE [--steps N] [--out FILE]
     drake-abs replay POLICY.json|POLICY.npz [--env ID] [--steps N] [--seed S] [--out FILE]
     drake-abs evaluate POLICY.npz [--env ID] [--seeds N] [--max-steps N] [--json FILE]
@@ -439,6 +441,64 @@ def _evaluate(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     return 0
 
 
+def task_argument(text: str) -> str:
+    """An argparse type: a locomotion task name in either spelling (``half-cheetah`` ->
+    ``half_cheetah``)."""
+    from drake_abs.tasks.locomotion import TASKS
+
+    name = text.strip().lower().replace("-", "_")
+    if name not in TASKS:
+        raise argparse.ArgumentTypeError(
+            f"no task {text!r}: give one of " + ", ".join(display_name(t) for t in TASKS)
+        )
+    return name
+
+
+task_argument.__name__ = "task"
+
+
+def train_method(text: str) -> str:
+    """An argparse type: a method a training run trains (the registry's name; dashes accepted
+    for underscores)."""
+    from drake_abs.experiments.train import trainable_methods
+
+    known = trainable_methods()
+    for name in (text.strip(), text.strip().replace("-", "_")):
+        if name in known:
+            return name
+    raise argparse.ArgumentTypeError(f"no trainable method {text!r}: give one of "
+                                     + ", ".join(known))  # fmt: skip
+
+
+train_method.__name__ = "method"
+
+
+def _train(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """The train subcommand: the run's settings (``--set`` applied to the defaults), the run,
+    its report."""
+    import importlib.util
+
+    from drake_abs.experiments.train import base_settings, default_out, report, train
+    from drake_abs.policy.methods import method as registry_method
+
+    if registry_method(args.method).estimator == "sb3" and (
+        importlib.util.find_spec("stable_baselines3") is None
+    ):
+        sub.error(f"argument --method: {args.method} is a library baseline: it needs the "
+                  "baselines extra (pip install 'drake-abs[baselines]')")  # fmt: skip
+    try:
+        settings = base_settings(args.task, args.method, args.steps)
+    except ValueError as err:  # e.g. ARS on a task with no published settings
+        sub.error(f"argument --method: {err}")
+    if args.settings:
+        settings = with_settings(sub, settings, args.settings)
+    out = default_out(args.task, args.method, args.seed) if args.out is None else Path(args.out)
+    summary = train(args.task, args.method, steps=args.steps, seed=args.seed, out=out,
+                    settings=settings)  # fmt: skip
+    _print_report(report(summary), Path(summary["files"]["summary"]).parent)
+    return 0
+
+
 def _check_folder(parser: argparse.ArgumentParser, out: str | None) -> None:
     """A usage error unless ``--out`` can be a results folder: not a file, and not under one."""
     path = None if out is None else Path(out).expanduser()
@@ -532,6 +592,49 @@ def build_parser() -> argparse.ArgumentParser:
     add_ray_options(
         exp, "run the estimators' rollouts on Ray actors (a local cluster on 127.0.0.1)"
     )
+
+    tr = sub.add_parser(
+        "train",
+        help="train one policy on a locomotion task with a method of the registry",
+        description="Train one run of a locomotion task (our plant, gymnasium's reward) with a "
+        "method of the registry until it has stepped the budget of environment steps, printing "
+        "its progress; write the policy file (policy.npz, which evaluate and replay read) and "
+        "summary.json to the results folder.",
+        epilog="examples:\n"
+        "  drake-abs train hopper --method shac-abs --steps 200000\n"
+        "  drake-abs train hopper --method fopg_episode_abs --set shac.envs=16 --seed 1\n"
+        "  drake-abs train half-cheetah --method ars --set ars.directions=4\n"
+        "settings (--set): the fields of drake_abs.tasks.training_runs.RunSettings, dotted for "
+        "a group's\n(shac.actor_lr, ars.step_size); values are YAML. Defaults: the "
+        "gym-locomotion experiment's.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    tr.add_argument(
+        "task", type=task_argument, metavar="TASK",
+        help="the locomotion task: hopper, half-cheetah, walker2d or ant",
+    )  # fmt: skip
+    tr.add_argument(
+        "--method", type=train_method, required=True, metavar="M",
+        help="the method, by its registry name: shac_abs, shac_exact, fopg_episode_abs, "
+        "fopg_episode_exact, ars, sb3_ppo, sb3_sac or sb3_ars",
+    )  # fmt: skip
+    tr.add_argument(
+        "--steps", type=positive_int("--steps", "200000"), default=None, metavar="N",
+        help="the budget: environment steps (control periods) to train for (default: 1000000)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--seed", type=seed_number, default=0, metavar="S", help="the run's seed (default: 0)"
+    )
+    tr.add_argument(
+        "--out", default=None, metavar="DIR",
+        help="results folder (default: results/train-TASK-METHOD-seedS)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--set", action="append", default=[], dest="settings", metavar="KEY=VALUE",
+        help="a setting of the run (repeat for more; a dotted KEY such as shac.actor_lr sets a "
+        "field of a group of settings)",
+    )  # fmt: skip
+    tr.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     rec = sub.add_parser(
         "record",
@@ -664,7 +767,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.subcommands = {
         "demo": demo, "experiment": exp, "record": rec, "replay": rep, "sweep": sweep,
-        "evaluate": ev,
+        "evaluate": ev, "train": tr,
     }  # fmt: skip
 
     sub.add_parser(
@@ -733,6 +836,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "sweep":
         _check_folder(sub, args.out)
         return _run_sweep(sub, args)
+    if args.command == "train":
+        _check_folder(sub, args.out)
+        if args.steps is None:
+            from drake_abs.experiments.train import DEFAULT_STEPS
+
+            args.steps = DEFAULT_STEPS
+        return _train(sub, args)
     if args.command == "demo":
         _check_folder(sub, args.out)
         if args.duration is not None:
@@ -760,11 +870,19 @@ def _configured(sub: argparse.ArgumentParser, name: str, settings: list[str], te
     applied, or None without any; a usage error (exit 2) naming a bad one."""
     if not settings:
         return None
+    module = experiment_module(name)
+    base = module.Config.test_size() if test_size else module.Config()
+    return with_settings(sub, base, settings)
+
+
+def with_settings(sub: argparse.ArgumentParser, base, settings: list[str]):
+    """``base`` (a settings dataclass: an experiment's Config, a training run's settings) with
+    the ``--set KEY=VALUE`` texts applied, each value read as YAML and checked against its field
+    (a dotted KEY sets a field of a nested dataclass); a usage error (exit 2) of ``sub`` naming
+    a bad one: an unknown key, a wrong type, a key given twice or with several values."""
     from drake_abs.experiments.sweep import GridError, parse_setting
     from drake_abs.parallel.overrides import apply_overrides
 
-    module = experiment_module(name)
-    base = module.Config.test_size() if test_size else module.Config()
     values = {}
     try:
         for setting in settings:

@@ -19,8 +19,9 @@ PACKAGES = {
     "experiments": "drake_abs.experiments",
 }
 #: experiments/ modules that are not experiments: the command line, sweeps, the output folder
-#: helpers and the kernel warm-up. The CLI and the sweep load experiments by name (importlib).
-EXPERIMENT_SUPPORT = {"cli", "sweep", "outputs", "precompile", "__init__"}
+#: helpers, the kernel warm-up and the training command. The CLI and the sweep load experiments
+#: by name (importlib).
+EXPERIMENT_SUPPORT = {"cli", "sweep", "outputs", "precompile", "train", "__init__"}
 
 
 def _modules() -> dict[str, Path]:
