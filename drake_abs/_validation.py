@@ -33,10 +33,27 @@ def as_finite_array(value, name: str, *, ndim: tuple[int, ...] | None = None) ->
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise ValueError(
-            f"{name} contains NaN or inf (first at index {tuple(int(i) for i in bad)}); "
-            "all entries must be finite"
+            f"{name} contains NaN or inf (first at index {tuple(int(i) for i in bad)}: "
+            f"{arr[tuple(bad)]}); all entries must be finite"
         )
     return arr
+
+
+def check_finite_batch(arr: np.ndarray, name: str, *, batched: bool = True, what: str = "") -> None:
+    """Raise ``ValueError`` unless every entry of ``arr`` (B, n) is finite, naming the first bad
+    entry by its row (the batch index) and column, its value, and how many there are: ``x must
+    be finite; x[2, 4] is nan (batch row 2, column 4)``. With ``batched`` False, ``arr`` is one
+    row given as a vector, named by its column alone (``x[4] is nan``). ``what`` starts the
+    message (e.g. ``"ComplementarityPlant: the discrete state "``)."""
+    finite = np.isfinite(arr)
+    if finite.all():
+        return
+    bad = np.argwhere(~finite)
+    row, col = (int(i) for i in bad[0])
+    where = f"{name}[{row}, {col}]" if batched else f"{name}[{col}]"
+    at = f" (batch row {row}, column {col})" if batched else ""
+    more = f"; {len(bad)} non-finite entries in all" if len(bad) > 1 else ""
+    raise ValueError(f"{what}{name} must be finite; {where} is {arr[row, col]}{at}{more}")
 
 
 def check_counts(config, names: tuple[str, ...]) -> None:
@@ -88,21 +105,21 @@ def batch_of_states(x, u, nx: int, nu: int) -> tuple[np.ndarray, np.ndarray, boo
     """States x (B, nx) and inputs u (B, nu) of one batched step, checked: one state (nx,)
     becomes a batch of one, inputs (nu,) are shared by the batch. Returns (x, u, batched), where
     ``batched`` is False for one unbatched state. ``ValueError`` names the argument and the
-    expected shape, or says which is not finite."""
+    expected shape, or the first entry that is not finite (row and column,
+    :func:`check_finite_batch`)."""
     x = np.asarray(x, dtype=float)
     batched = x.ndim != 1
     x = np.atleast_2d(x)
     if x.ndim != 2 or x.shape[1] != nx:
         raise ValueError(f"x must have shape (B, nx) = (B, {nx}) or (nx,); got {x.shape}")
     u = np.asarray(u, dtype=float)
+    u_batched = u.ndim != 1
     try:
         u = np.broadcast_to(u, (x.shape[0], nu)) if u.shape != (x.shape[0], nu) else u
     except ValueError:
         raise ValueError(
             f"u must have shape (B, nu) = ({x.shape[0]}, {nu}) or (nu,); got {u.shape}"
         ) from None
-    if not np.isfinite(x).all():
-        raise ValueError("x must be finite")
-    if not np.isfinite(u).all():
-        raise ValueError("u must be finite")
+    check_finite_batch(x, "x", batched=batched)
+    check_finite_batch(u if u_batched else u[:1], "u", batched=batched and u_batched)
     return x, u, batched

@@ -28,6 +28,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector_, ValueProducer
 
+from drake_abs._validation import check_finite_batch
 from drake_abs.systems import autodiff
 
 #: Steppers kept for changed parameter values, per plant (the oldest are dropped beyond this).
@@ -143,12 +144,14 @@ class ComplementarityPlantBase:
         (s, m); under AutoDiffXd with the derivatives chained (the ``mu`` output's are zero
         where the stepper does not form them)."""
         if not any(autodiff.is_autodiff(a) for a in (x, u, s, m)):
+            self._check_finite(x, u)
             stepper = self._stepper_for(np.asarray(s, float), np.asarray(m, float))
             r = stepper.step(
                 np.asarray(x, float)[None], np.asarray(u, float)[None], jacobians=False
             )
             return r.x_next[0], r.impulse[0], r.mu[0], bool(np.all(r.converged))
         (xv, uv, sv, mv), (gx, gu, gs, gm) = autodiff.split([x, u, s, m])
+        self._check_finite(xv, uv)
         model, smooth = bool(np.any(gm)), bool(np.any(gs))
         r = (
             self._stepper_for(sv, mv)
@@ -173,6 +176,17 @@ class ComplementarityPlantBase:
             for v, n in ((r.x_next, "dx"), (r.impulse, "dimpulse"), (r.mu, "dmu"))
         )
         return x_next, impulse, mu, bool(np.all(r.converged))
+
+    def _check_finite(self, x, u) -> None:
+        """``ValueError`` naming the first entry of the discrete state x or of the actuation
+        input u that is not finite (its index and value), before the step is taken."""
+        plant = type(self).__name__.split("_")[0]  # the family's name, not the scalar type's
+        if self.get_name():
+            plant = f"{plant} {self.get_name()!r}"
+        check_finite_batch(np.asarray(x, float)[None], "x", batched=False,
+                           what=f"{plant}: the discrete state ")  # fmt: skip
+        check_finite_batch(np.asarray(u, float)[None], "u", batched=False,
+                           what=f"{plant}: the actuation input ")  # fmt: skip
 
     def _Update(self, context, discrete_state) -> None:
         discrete_state.set_value(self._x, self._step_cache.Eval(context)[0])

@@ -83,6 +83,7 @@ are raised to it and ``result.mu_target`` reports the raised value.
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from dataclasses import dataclass
 from typing import Literal
@@ -429,8 +430,8 @@ def _solve(
         with np.errstate(all="ignore"):
             dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
         dlam_dmu = dlam_dmu_pc if per_contact_mu else dlam_dmu_pc.sum(axis=-1)
-        for arr in (dlam_dq, dlam_dmu):
-            finite &= np.all(np.isfinite(arr.reshape(B, -1)), axis=1)
+        for arr in (dlam_dq, dlam_dmu):  # per problem (an explicit width: B may be 0)
+            finite &= np.all(np.isfinite(arr.reshape(B, math.prod(arr.shape[1:]))), axis=1)
     if not finite.all():
         status[~finite] = LCPStatus.NUMERICAL_FAILURE
         residual[~finite] = np.inf

@@ -29,6 +29,7 @@ from xml.etree import ElementTree
 import numpy as np
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, ModelInstanceIndex
 
 from drake_abs.contact.lcs import GradientMode
 from drake_abs.contact.smoothing import Smoothing
@@ -184,7 +185,8 @@ def scene_joint_friction(scene: Scene, plant: MultibodyPlant) -> np.ndarray:
     (Drake drops a URDF joint's ``<dynamics friction>``, warning that it does not model it)."""
     out = np.zeros(plant.num_velocities())
     for i, spec in enumerate(scene.models):
-        path = resolve_model_file(spec, f"scene {scene.name!r}: models[{i}].file")
+        key = f"models[{i}].file"
+        path = resolve_model_file(spec, f"{scene.locate(key)}: {key}")
         if path.suffix.lower() != ".xml":
             continue
         info = read_mjcf(path, spec.ignore)
@@ -203,7 +205,7 @@ def add_scene_models(
     """Parse the scene's models into ``plant`` (not finalized), with welds, actuators and
     floating bases; ``collisions=False`` leaves the files' collision geometry out (see
     :func:`~drake_abs.multibody.parsing.add_model_specs`)."""
-    add_model_specs(plant, scene.models, f"scene {scene.name!r}", parser, collisions=collisions)
+    add_model_specs(plant, scene.models, scene.locate, parser, collisions=collisions)
 
 
 def _check_armature(model: PinocchioContactModel, plant: MultibodyPlant) -> None:
@@ -263,6 +265,50 @@ def scene_contacts(scene: Scene) -> list[PointContact | PairContact]:
     return contact_candidates(f"scene {scene.name!r}", scene.models, scene.contacts, scene.pairs)
 
 
+def check_scene_bodies(scene: Scene, plant: MultibodyPlant) -> None:
+    """``ValueError`` for a body (or model instance) that a ``contacts`` or ``pairs`` entry of
+    ``scene`` names and ``plant`` (its models, parsed) does not have, naming the scene file, the
+    key's line (:meth:`~drake_abs.multibody.scene.Scene.locate`), the key and the bodies there
+    are (and the closest name)."""
+    entries = [(f"contacts[{i}]", "body", c.body, "model", c.model)
+               for i, c in enumerate(scene.contacts)]  # fmt: skip
+    for i, p in enumerate(scene.pairs):
+        entries += [(f"pairs[{i}]", "a", p.a, "model_a", p.model_a),
+                    (f"pairs[{i}]", "b", p.b, "model_b", p.model_b)]  # fmt: skip
+    for entry, field, body, model_field, model in entries:
+        instances = None
+        if model is not None:
+            if not plant.HasModelInstanceNamed(model):
+                key = f"{entry}.{model_field}"
+                names = [plant.GetModelInstanceName(ModelInstanceIndex(k))
+                         for k in range(plant.num_model_instances())]  # fmt: skip
+                raise ValueError(
+                    f"{scene.locate(key)}: {key}: no model instance {model!r}; the scene's: "
+                    f"{', '.join(names)}{_closest(model, names)}"
+                )
+            instances = [plant.GetModelInstanceByName(model)]
+        if instances is None:
+            found = plant.HasBodyNamed(body)
+            names = [plant.get_body(BodyIndex(b)).name() for b in range(plant.num_bodies())]
+        else:
+            found = plant.HasBodyNamed(body, instances[0])
+            names = [plant.get_body(b).name() for b in plant.GetBodyIndices(instances[0])]
+        if not found:
+            key = f"{entry}.{field}"
+            inside = f" in model instance {model!r}" if model is not None else ""
+            names = sorted(set(names) - {"world"})
+            raise ValueError(
+                f"{scene.locate(key)}: {key}: no body {body!r}{inside}; the bodies: "
+                f"{', '.join(names)}{_closest(body, names)}"
+            )
+
+
+def _closest(name: str, names: list[str]) -> str:
+    """`` (did you mean 'x'?)`` for the name of ``names`` closest to ``name``, or ``""``."""
+    close = difflib.get_close_matches(name, names, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
 def build_scene_model(scene: Scene | str | Path) -> SceneModel:
     """The dynamics plant, contact model and initial state of ``scene`` (a :class:`Scene`, a
     shipped scene's name, or a YAML path)."""
@@ -271,6 +317,7 @@ def build_scene_model(scene: Scene | str | Path) -> SceneModel:
     plant = MultibodyPlant(0.0)
     add_scene_models(plant, scene)
     plant.Finalize()
+    check_scene_bodies(scene, plant)
     contacts = scene_contacts(scene)
     ground = GroundPlane(scene.ground_normal, scene.ground_height)
     args = (plant, contacts, ground, scene.time_step, scene.friction_directions)

@@ -161,8 +161,8 @@ def resolve_package_file(file: str, where: str = "", what: str = "model file") -
     ``package://drake_abs/models/box_planar.sdf``,
     ``package://example-robot-data/robots/go1_description/urdf/go1.urdf``,
     ``package://gymnasium/hopper.xml``), an alias of one (:data:`MODEL_FILE_ALIASES`), or a path
-    on disk. ``ValueError`` (prefixed with ``where``) for an unknown package,
-    ``FileNotFoundError`` for a missing file (``what``: the kind of file, for the message)."""
+    on disk. ``ValueError`` for an unknown package, ``FileNotFoundError`` for a missing file
+    (``what``: the kind of file, for the message), both prefixed with ``where``."""
     url = model_file_url(file)
     if url is None:
         path = Path(file).expanduser()
@@ -179,5 +179,6 @@ def resolve_package_file(file: str, where: str = "", what: str = "model file") -
         except RuntimeError:  # Drake's: the URI resolves to a file that does not exist
             path = folder / rest
     if not path.is_file():
-        raise FileNotFoundError(f"{what} {file!r} not found (looked at {path})")
+        prefix = f"{where}: " if where else ""
+        raise FileNotFoundError(f"{prefix}{what} {file!r} not found (looked at {path.absolute()})")
     return path

@@ -7,7 +7,7 @@ body gets a floating base made of joints (:func:`add_floating_base_chains`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from pydrake.math import RigidTransform, RollPitchYaw
@@ -66,7 +66,7 @@ def _parse(parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where:
 def add_model_specs(
     plant: MultibodyPlant,
     models: Sequence[ModelSpec],
-    where: str,
+    where: str | Callable[[str], str],
     parser: Parser | None = None,
     *,
     collisions: bool = True,
@@ -75,20 +75,41 @@ def add_model_specs(
     floating bases (a quaternion floating joint where a URDF declares a ``floating`` joint to
     the world, :func:`add_floating_base_chains` for the other free bodies); ``collisions=False``
     leaves the files' collision geometry out (and draws STL visuals through OBJ copies; see
-    :mod:`drake_abs.multibody.model_files`). ``where`` (``"scene 'box_push'"``) starts every
-    error message."""
+    :mod:`drake_abs.multibody.model_files`).
+
+    ``where`` starts every error message: a text (``"scene 'box_push'"``), or a function of the
+    scene key the error is about (``"models[0].file"``) such as
+    :meth:`~drake_abs.multibody.scene.Scene.locate`, which names the scene file and the key's
+    line. A missing model file, a ``weld`` frame or an ``actuate`` joint the file does not
+    have is reported with its key."""
+    locate = where if callable(where) else (lambda key: where)
     parser = parser or Parser(plant)
     register_packages(parser.package_map())  # the files' own package:// URIs (meshes)
     for i, spec in enumerate(models):
-        entry = f"{where}: models[{i}]"
-        path = resolve_model_file(spec, where=f"{entry}.file")
+        entry = f"{locate(f'models[{i}]')}: models[{i}]"
+        key = f"models[{i}].file"
+        path = resolve_model_file(spec, where=f"{locate(key)}: {key}")
         instances = _parse(parser, path, collisions, spec, entry)
         instance = instances[0]
         if spec.name:
             plant.RenameModelInstance(instance, spec.name)
         if spec.weld:
+            if not plant.HasFrameNamed(spec.weld, instance):
+                key = f"models[{i}].weld"
+                frames = sorted(plant.get_frame(f).name() for f in plant.GetFrameIndices(instance))
+                raise ValueError(
+                    f"{locate(key)}: {key}: {spec.file} has no frame {spec.weld!r} to weld; its "
+                    f"frames: {', '.join(frames)}"
+                )
             plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.weld, instance))
-        for joint in spec.actuate:
+        for j, joint in enumerate(spec.actuate):
+            if not plant.HasJointNamed(joint, instance):
+                key = f"models[{i}].actuate[{j}]"
+                joints = sorted(plant.get_joint(k).name() for k in plant.GetJointIndices(instance))
+                raise ValueError(
+                    f"{locate(key)}: {key}: {spec.file} has no joint {joint!r} to actuate; its "
+                    f"joints: {', '.join(joints) or 'none'}"
+                )
             plant.AddJointActuator(f"{joint}_actuator", plant.GetJointByName(joint, instance))
         if spec.floating_base == "quaternion":
             add_quaternion_floating_joints(plant, instances)

@@ -68,6 +68,7 @@ import numbers
 import re
 import types
 import typing
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -476,6 +477,16 @@ class Scene:
         where = f"scene {self.name!r}"
         return len(contact_candidates(where, self.models, self.contacts, self.pairs))
 
+    def locate(self, key: str = "") -> str:
+        """Where ``key`` of this scene is (``"contacts[0].body"``; ``""``: the scene itself), to
+        start an error found after loading (a body a model file does not have, a missing model
+        file): the scene file and the key's line (or the nearest enclosing key's) for a scene
+        read from YAML, as the loader's own errors name them; else ``scene '<name>'``."""
+        source = _SOURCES.get(id(self))
+        if source is None or source[0]() is not self:
+            return f"scene {self.name!r}"
+        return _at(source[1], source[2], key)
+
     def to_dict(self) -> dict[str, Any]:
         """The scene as plain data, as a scene file writes it (mappings, lists, numbers, text,
         null; the smoothing named by ``kind``): ``Scene.from_dict(scene.to_dict()) == scene``."""
@@ -803,9 +814,24 @@ def _load(data: Any, label: str, lines: Mapping[str, int] | None = None) -> Scen
             problem = model_file_problem(model.file)
             if problem is not None:
                 raise _Problem(f"models[{i}].file", f"models[{i}].file: {problem}")
+        if lines is not None:  # read from YAML: later errors name the file and line (locate)
+            _remember_source(scene, label, lines)
         return scene
     except _Problem as problem:
         raise ValueError(f"{_at(label, lines or {}, problem.key)}: {problem.message}") from None
+
+
+#: Where each scene read from YAML came from, by the scene's id: (a weak reference to it, the
+#: file's label, the line of each key). Kept outside the scene (its fields are its data, and
+#: equal scenes from different files stay equal); an entry goes with its scene.
+_SOURCES: dict[int, tuple[weakref.ref, str, dict[str, int]]] = {}
+
+
+def _remember_source(scene: Scene, label: str, lines: Mapping[str, int]) -> None:
+    """Hold where ``scene`` was read from, for :meth:`Scene.locate`."""
+    key = id(scene)
+    ref = weakref.ref(scene, lambda _, key=key: _SOURCES.pop(key, None))
+    _SOURCES[key] = (ref, label, dict(lines))
 
 
 def _at(label: str, lines: Mapping[str, int], key: str) -> str:

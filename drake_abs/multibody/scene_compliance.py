@@ -74,7 +74,8 @@ def _file_parameters(scene: Scene, contacts) -> tuple[list[ContactParameters], f
     """Each candidate's contact parameters from the scene's MJCF files, and their impratio."""
     infos: list[MjcfContactInfo] = []
     for i, spec in enumerate(scene.models):
-        path = resolve_model_file(spec, f"scene {scene.name!r}: models[{i}].file")
+        key = f"models[{i}].file"
+        path = resolve_model_file(spec, f"{scene.locate(key)}: {key}")
         if path.suffix == ".xml":
             infos.append(read_geom_contacts(path))
     if not infos:

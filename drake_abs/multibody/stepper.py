@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drake_abs._validation import as_real_number, batch_of_states
+from drake_abs._validation import as_real_number, batch_of_states, check_finite_batch
 from drake_abs.contact.compliance import ContactCompliance
 from drake_abs.contact.cone import FORMULATIONS, FrictionCone
 from drake_abs.contact.contact_lcp import CONTACT_SOLVER_DEFAULTS, contact_step
@@ -394,8 +394,7 @@ class ComplementarityStepper:
             raise ValueError(
                 f"x must have shape (B, nq + nv) = (B, {nq + nv}) or (nq + nv,); got {arr.shape}"
             )
-        if not np.isfinite(arr).all():
-            raise ValueError("x must be finite")
+        check_finite_batch(arr, "x", batched=not single)
         depth = np.zeros(arr.shape[0])
         if nc:
             depth = np.maximum(0.0, -self.model.distances(arr[:, :nq]).min(axis=1))
