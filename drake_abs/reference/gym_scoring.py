@@ -18,7 +18,7 @@ Floors (:func:`floors`), over the same reset seeds:
 Measured here (gymnasium 1.4.0, mujoco 4.0.0, reset seeds 0 .. 9, 1000 steps): see
 ``docs/policy_files.md``.
 
-Needs gymnasium and MuJoCo (``pip install 'gymnasium[mujoco]'``), imported when called.
+Needs gymnasium and MuJoCo (``pip install 'drake-abs[mujoco]'``), imported when called.
 """
 
 from __future__ import annotations

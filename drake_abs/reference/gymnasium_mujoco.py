@@ -4,7 +4,7 @@ frame skip, integrator), the frame skip of a given control period, and the state
 :meth:`~drake_abs.reference.mujoco_plant.MujocoStepper.from_gymnasium` runs their episodes in
 the engine from gymnasium's own initial states.
 
-Needs gymnasium and MuJoCo (``pip install 'gymnasium[mujoco]'``), imported when called.
+Needs gymnasium and MuJoCo (``pip install 'drake-abs[mujoco]'``), imported when called.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """MuJoCo as a stepper: ``mj_step`` ``frame_skip`` times per step, batched over a leading axis,
 returning the one step record, so that MuJoCo runs in the same engine
 (:func:`drake_abs.engine.open_loop`, :func:`~drake_abs.engine.rollout`) as this package's
-steppers. MuJoCo is an optional dependency (``pip install mujoco``, or gymnasium's ``[mujoco]``
-extra), imported when a stepper is made.
+steppers. MuJoCo is an optional dependency (the ``mujoco`` extra: ``pip install
+'drake-abs[mujoco]'``), imported when a stepper is made.
 
 Coordinates are MuJoCo's: x = (qpos, qvel, act) (nq + nv + na,), u = ctrl (nu,) (MuJoCo's
 control, e.g. gymnasium's action; the joint torque is ctrl times the actuator's gear, which

@@ -21,23 +21,17 @@ and ``drake_abs/Ant-v0`` make this environment; ``import drake_abs`` registers t
 (:mod:`drake_abs.tasks.gym_registration`, whose :func:`register_envs` and :data:`ENV_IDS` this
 module re-exports).
 
-Needs gymnasium (``pip install 'drake-abs[dev]'``); the rest of :mod:`drake_abs.tasks` does not.
+Needs gymnasium (a dependency of the package, as the locomotion tasks' scenes read its model
+files), not MuJoCo; the rest of :mod:`drake_abs.tasks` imports neither.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import gymnasium
 import numpy as np
-
-try:
-    import gymnasium
-    from gymnasium import spaces
-except ImportError as err:  # pragma: no cover - gymnasium is in the dev extra
-    raise ImportError(
-        "drake_abs.tasks.gym_env needs gymnasium: pip install 'gymnasium>=1.0' (or the dev extra "
-        "of drake-abs)"
-    ) from err
+from gymnasium import spaces
 
 from drake_abs._validation import as_count, as_finite_array
 from drake_abs.engine.steppers import inside_ground, refuse_inside_ground
