@@ -18,8 +18,9 @@ gymnasium's).
 
 The gymnasium ids ``drake_abs/Hopper-v0``, ``drake_abs/HalfCheetah-v0``, ``drake_abs/Walker2d-v0``
 and ``drake_abs/Ant-v0`` make this environment; ``import drake_abs`` registers them
-(:mod:`drake_abs.tasks.gym_registration`, whose :func:`register_envs` and :data:`ENV_IDS` this
-module re-exports).
+(:mod:`drake_abs.tasks.gym_registration`, whose
+:func:`~drake_abs.tasks.gym_registration.register_envs` and
+:data:`~drake_abs.tasks.gym_registration.ENV_IDS` this module re-exports).
 
 Needs gymnasium (a dependency of the package, as the locomotion tasks' scenes read its model
 files), not MuJoCo; the rest of :mod:`drake_abs.tasks` imports neither.
