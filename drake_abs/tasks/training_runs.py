@@ -117,9 +117,9 @@ class RunSettings:
         control_period: seconds per action; None: gymnasium's.
         substeps: plant steps per action; None: the task's default.
         contact: the contact law every method trains on: ``"hard"`` (complementarity) or
-            ``"mujoco"`` (MuJoCo's soft contact, :func:`~drake_abs.tasks.locomotion.
-            locomotion_task`'s ``contact``); the score in MuJoCo and on our exact plant is the
-            same either way.
+            ``"mujoco"`` (MuJoCo's soft contact: the ``contact`` option of
+            :func:`~drake_abs.tasks.locomotion.locomotion_task`); the score in MuJoCo and on
+            our exact plant is the same either way.
         ars: ARS's settings; None: the published ones of the task.
         sb3_envs: environments the library baselines PPO and SAC step together (their
             hyperparameters adapted to keep the data per update,
