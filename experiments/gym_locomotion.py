@@ -237,8 +237,11 @@ def train_one(config: Config, task: str, method: str, seed: int, folder: Path,
         exact = locomotion_task(task, control_period=run_.task.dt, substeps=run_.task.substeps)
         plant = score_on_plant(exact, file, seeds=range(config.score_seeds),
                                max_steps=config.episode_steps)  # fmt: skip
+    # training windows (SHAC) dropped for an unconverged contact solve, over the whole run
+    dropped = sum(int(row.get("dropped", 0)) for row in run_.rows)
     record = {"identity": identity, "status": "done", "curve": curve, "mujoco": final,
               "plant": plant, "env_steps": run_.env_steps, "seconds": run_.seconds,
+              "dropped_windows": dropped,
               "log": run_.rows[-1] if run_.rows else {}}  # fmt: skip
     outputs.write_json(record_path, record)
     checkpoint.unlink(missing_ok=True)  # finished: the policy file is what stays

@@ -51,6 +51,7 @@ def test_outputs_and_the_shipped_policy_scores_what_the_record_says(done):
     assert r["plant_mean"] is not None and np.isfinite(r["plant_mean"])
     record = json.loads((out / "runs/hopper/shac_abs/seed0/run.json").read_text())
     assert [row["env_steps_target"] for row in record["curve"]] == g.evaluation_schedule(cfg)
+    assert isinstance(record["dropped_windows"], int) and record["dropped_windows"] >= 0
     for name in ("summary", "curves", "table", "return_hopper"):
         assert (out / summary["files"][name]).exists()
     assert "Hopper-v5" in g.report(summary)
