@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 from drake_abs.policy.ars_trainer import ArsConfig, ArsTrainer
 from drake_abs.policy.methods import method as registry_method
@@ -56,6 +56,9 @@ from drake_abs.tasks.locomotion import (
     locomotion_task,
 )
 from drake_abs.tasks.published_policies import task_policy_file
+
+if TYPE_CHECKING:  # the baselines extra: imported when a run is built
+    from drake_abs.tasks.sb3_baselines import Sb3Trainer
 
 __all__ = [
     "ArsRun",
@@ -215,7 +218,7 @@ class TrainerRun:
     is."""
 
     task: LocomotionTask
-    trainer: ShacTrainer | ArsTrainer
+    trainer: ShacTrainer | ArsTrainer | Sb3Trainer
     method: str
     seed: int
 
@@ -302,7 +305,7 @@ class ArsRun(TrainerRun):
         return self
 
 
-class Sb3Run:
+class Sb3Run(TrainerRun):
     """A library baseline's run (``sb3`` methods:
     :class:`~drake_abs.tasks.sb3_baselines.Sb3Trainer`) as a :class:`TrainingRun`, on the
     exact plant with gymnasium's reward."""
@@ -323,28 +326,9 @@ class Sb3Run:
         self.task = self.trainer.task
 
     @property
-    def env_steps(self) -> int:
-        return int(self.trainer.state.env_steps)
-
-    @property
-    def seconds(self) -> float:
-        return float(self.trainer.state.seconds)
-
-    @property
-    def rows(self) -> list[dict]:
-        """The trainer's log (:class:`~drake_abs.tasks.sb3_baselines.TrainingLog` rows)."""
-        return self.trainer.state.rows
-
-    @property
     def recent_return(self) -> float | None:
         """Mean return (gymnasium's reward) of the episodes that ended lately."""
         return self.trainer.recent_return
-
-    def iterate(self) -> dict:
-        return self.trainer.iterate()
-
-    def save(self, path: str | Path) -> None:
-        self.trainer.save(path)
 
     def load(self, path: str | Path) -> Sb3Run:
         """This run continued from the checkpoint at ``path``."""
@@ -352,6 +336,8 @@ class Sb3Run:
         return self
 
     def policy_file(self, **metadata) -> PolicyFile:
+        """The library model's policy, labelled with this run's method (the trainer's
+        :meth:`~drake_abs.tasks.sb3_baselines.Sb3Trainer.policy_file`)."""
         return self.trainer.policy_file(**({"method": self.method} | metadata))
 
 
