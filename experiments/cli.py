@@ -7,7 +7,8 @@ Usage::
                          [--ray] [--address ADDR] [--workers N]
     drake-abs experiment --list
     drake-abs sweep NAME [--seeds S ...] [--set KEY=V1,V2 ...] [--test-size] [--out DIR] [--ray]
-                    [--address ADDR] [--workers N] [--metric KEY] [--fresh] [--no-progress]
+                    [--address ADDR] [--workers N] [--metric KEY] [--fresh | --check]
+                    [--no-progress]
     drake-abs train TASK --method M [--steps N] [--seed S] [--out DIR] [--set KEY=VALUE ...]
                     [--no-progress]
     drake-abs record SCENE [--steps N] [--out FILE]
@@ -221,9 +222,16 @@ def wants_ray(sub: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
 
 def _run_sweep(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     """The sweep subcommand: build the grid (argument errors exit 2), run it, print the report;
-    1 if a point failed (everything is written first)."""
-    from drake_abs.experiments.sweep import ExperimentPoint, GridError, build_grid, report
-    from drake_abs.parallel.sweep import run_sweep
+    1 if a point failed (everything is written first). With ``--check``, run nothing: print
+    what a run would do with every point; 0 if every point is fresh, else 1."""
+    from drake_abs.experiments.sweep import (
+        ExperimentPoint,
+        GridError,
+        build_grid,
+        check_report,
+        report,
+    )
+    from drake_abs.parallel.sweep import FRESH, check_sweep, run_sweep
 
     on_ray = wants_ray(sub, args)
     try:
@@ -232,6 +240,13 @@ def _run_sweep(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     except GridError as err:
         sub.error(f"argument {err.argument}: {err}")
     out = Path(args.out or f"results/sweep-{args.name}").expanduser().resolve()
+    if args.check:
+        from drake_abs.parallel.provenance import provenance
+
+        fn = ExperimentPoint(args.name, args.test_size)
+        states = check_sweep(fn, points, out)
+        print(check_report(states, description=fn.describe(), out=out, provenance=provenance()))
+        return 0 if all(s.state == FRESH for s in states) else 1
     result = run_sweep(
         ExperimentPoint(args.name, args.test_size), points, out,
         backend="ray" if on_ray else "local", address=args.address, num_cpus=args.workers,
@@ -730,9 +745,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="run an experiment over seeds and settings, here or on a Ray cluster",
         description="Run one experiment for every combination of seeds and settings, each "
         "point in its own folder (points/NAME under the results folder), and gather the "
-        "summaries into sweep.json, sweep.csv and sweep.png. A point already done in the "
-        "results folder is not computed again; a point that fails is reported with its "
-        "traceback and the others complete (the exit code is then 1).",
+        "summaries into sweep.json, sweep.csv and sweep.png. Every point records what produced "
+        "it: its whole Config, the drake-abs version and git commit, the versions of the "
+        "libraries that compute the numbers. A point already done in the results folder is not "
+        "computed again when its Config, the drake-abs version and those library versions all "
+        "match (the commit alone does not count: --fresh recomputes everything); otherwise it "
+        "is recomputed and the report says why. A point that fails is reported with its "
+        "traceback and the others complete (the exit code is then 1). --check runs nothing: "
+        "it lists every point as fresh (a run would reuse it), stale (with what differs), "
+        "missing or unfinished, and exits 0 when every point is fresh, 1 otherwise.",
         epilog="examples:\n"
         "  drake-abs sweep gradient-variance --test-size --seeds 0 1 2 --set samples=8,16\n"
         "  drake-abs sweep gradient-variance --seeds 0 1 --set 'horizons=[10,50],[100]' --ray\n"
@@ -763,7 +784,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--metric", default=None, metavar="KEY",
         help="the numeric column of sweep.csv to plot (default: the first that varies)",
     )  # fmt: skip
-    sweep.add_argument("--fresh", action="store_true", help="recompute every point (no resume)")
+    redo = sweep.add_mutually_exclusive_group()
+    redo.add_argument("--fresh", action="store_true", help="recompute every point (no resume)")
+    redo.add_argument(
+        "--check", action="store_true",
+        help="run nothing: list every point as fresh, stale (and why), missing or unfinished; "
+        "exit code 0 when all are fresh, 1 otherwise",
+    )  # fmt: skip
     sweep.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.subcommands = {
         "demo": demo, "experiment": exp, "record": rec, "replay": rep, "sweep": sweep,

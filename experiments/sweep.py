@@ -5,12 +5,16 @@
   (``Config.test_size()`` or ``Config()``), applies the point's values as overrides (checked
   against the fields' types, :mod:`drake_abs.parallel.overrides`), runs the experiment into
   the point's folder and returns its summary. It is picklable (a frozen dataclass holding the
-  experiment's name), so Ray workers import the experiment themselves.
+  experiment's name), so Ray workers import the experiment themselves. Every point records its
+  whole resolved Config (:meth:`ExperimentPoint.resolved_config`) and what produced it
+  (:mod:`drake_abs.parallel.provenance`); a finished point is reused only when all of it
+  matches (:mod:`drake_abs.parallel.sweep`).
 - :func:`build_grid` turns ``--seeds 0 1`` and ``--set KEY=V1,V2`` into the points: every
   combination of the settings' values, for every seed (seed-major: all configurations of the
   first seed come first). Values are YAML (``10``, ``1e-4``, ``true``, ``[10, 50]``; a list or
   ``(10, 50)`` is one tuple value), split on top-level commas only.
-- :func:`report` is the text the command line prints.
+- :func:`report` is the text the command line prints after a sweep, :func:`check_report` the
+  one of ``drake-abs sweep --check`` (what a run would do with every point, running nothing).
 """
 
 from __future__ import annotations
@@ -29,8 +33,9 @@ from drake_abs.parallel.overrides import (
     field_spec,
     has_field,
 )
-from drake_abs.parallel.sweep import SweepResult
-from drake_abs.parallel.sweep_points import label
+from drake_abs.parallel.provenance import short_commit
+from drake_abs.parallel.sweep import FRESH, MISSING, STALE, UNFINISHED, PointState, SweepResult
+from drake_abs.parallel.sweep_points import jsonable, label
 
 
 class GridError(ValueError):
@@ -77,22 +82,19 @@ class ExperimentPoint:
         finally:
             outputs.set_progress(previous)
 
-    def describe(self) -> dict:
-        """What sweep.json and every point.json record as the sweep's function: the experiment,
-        its whole base Config (every default a point's values do not override) and the
-        drake-abs version. A finished point is reused only when all of it matches: a changed
-        default or another release recomputes it."""
-        import dataclasses
-        import json
-        from importlib.metadata import PackageNotFoundError, version
+    def resolved_config(self, values: dict) -> dict:
+        """The whole Config of a point as every point.json records it (JSON types): every field,
+        the defaults the point's values do not override included, so that a changed default
+        recomputes the point (the version and dependencies are recorded apart:
+        :mod:`drake_abs.parallel.provenance`)."""
+        return jsonable(self.config(values))
 
-        try:
-            ours = version("drake-abs")
-        except PackageNotFoundError:  # a checkout that is not installed
-            ours = "unknown"
-        config = json.loads(json.dumps(dataclasses.asdict(self.base_config()), default=str))
-        return {"experiment": self.experiment, "test_size": self.test_size, "config": config,
-                "drake_abs_version": ours}  # fmt: skip
+    def describe(self) -> dict:
+        """What sweep.json and every point.json record as the sweep's function: the experiment
+        and whether it starts from the test size. The rest of what a point is reused for, its
+        whole Config and the versions, is recorded per point (:meth:`resolved_config`,
+        :mod:`drake_abs.parallel.sweep`)."""
+        return {"experiment": self.experiment, "test_size": self.test_size}
 
 
 # -------------------------------------------------------------------------------------- the grid
@@ -222,20 +224,56 @@ def build_grid(
 # ---------------------------------------------------------------------------------------- report
 
 
+#: At most this many points are listed by name where a report lists recomputed points.
+MAX_LISTED = 20
+
+
+def _what(description: Any) -> str:
+    if isinstance(description, dict) and "experiment" in description:
+        return description["experiment"] + (" (test size)" if description.get("test_size") else "")
+    return str(description)
+
+
+def produced_by(provenance: Any) -> str:
+    """A provenance record in one line: ``drake-abs 0.2.0, commit d80ba48 (dirty)``."""
+    version = provenance.get("drake_abs_version") if isinstance(provenance, dict) else None
+    return f"drake-abs {version or 'unknown'}, commit {short_commit(provenance)}"
+
+
 def report(result: SweepResult) -> str:
-    """The sweep in a few lines: the counts, the metric per configuration (mean, min, max over
-    seeds), every failed point with where its traceback is, and the gathered files."""
+    """The sweep in a few lines: the counts, what produced it (drake-abs version and commit;
+    reused points recorded at another commit are counted), every point recomputed although it
+    had a record and why, the metric per configuration (mean, min, max over seeds), every failed
+    point with where its traceback is, and the gathered files."""
     from drake_abs.parallel.sweep_gather import table
 
-    what = result.description
-    if isinstance(what, dict) and "experiment" in what:
-        what = what["experiment"] + (" (test size)" if what.get("test_size") else "")
+    what = _what(result.description)
     failed = result.failures
     lines = [
         f"sweep of {what}: {len(result.points)} point{'s' * (len(result.points) != 1)} on "
         f"{result.backend}: {len(result.points) - len(failed)} done, {len(failed)} failed; "
         f"{len(result.computed)} run now, {len(result.reused)} reused from an earlier run"
     ]
+    if result.provenance is not None:
+        now = short_commit(result.provenance)
+        elsewhere: dict[str, int] = {}
+        for p in result.reused:
+            commit = short_commit(p.provenance)
+            if commit != now:
+                elsewhere[commit] = elsewhere.get(commit, 0) + 1
+        line = f"run by {produced_by(result.provenance)}"
+        if elsewhere:
+            counts = ", ".join(f"{c}: {n} point{'s' * (n != 1)}" for c, n in elsewhere.items())
+            line += f"; reused points computed at other commits: {counts}"
+        lines.append(line)
+    recomputed = result.recomputed
+    if recomputed:
+        lines.append(f"recomputed {len(recomputed)} point{'s' * (len(recomputed) != 1)} whose "
+                     "earlier record could not be reused:")  # fmt: skip
+        lines += [f"  {p.name}: {p.recomputed_because}" for p in recomputed[:MAX_LISTED]]
+        if len(recomputed) > MAX_LISTED:
+            lines.append(f"  and {len(recomputed) - MAX_LISTED} more (recomputed_because in "
+                         "sweep.json)")  # fmt: skip
     if result.metric:
         _, rows = table(result.points)
         groups: dict[str, list[float]] = {}
@@ -258,4 +296,37 @@ def report(result: SweepResult) -> str:
             f"  traceback in {p.folder / 'point.json'}"
         )
     lines += [f"{key}: {path}" for key, path in result.files.items()]
+    return "\n".join(lines)
+
+
+def check_report(states: list[PointState], *, description: Any, out: Path, provenance: dict) -> str:
+    """The text of ``drake-abs sweep --check``: for every point, what a run would do with it
+    (:class:`~drake_abs.parallel.sweep.PointState`: fresh, stale with the reasons, missing,
+    unfinished with the reason; a fresh point recorded at another commit than the current one
+    names it), then the counts and what the current code is (version, commit)."""
+    counts = {kind: 0 for kind in (FRESH, STALE, MISSING, UNFINISHED)}
+    now = short_commit(provenance)
+    width = max(len(s.name) for s in states)
+    lines = [f"sweep of {_what(description)} in {out}:"]
+    for s in states:
+        counts[s.state] += 1
+        text = f"  {s.state:10s}  {s.name:{width}s}"
+        if s.reasons:
+            text += f"  {s.reason}"
+        elif s.state == FRESH:
+            recorded = short_commit((s.record or {}).get("provenance"))
+            if recorded != now:
+                text += f"  (recorded at commit {recorded})"
+        lines.append(text.rstrip())
+    total = len(states)
+    lines.append(
+        f"{total} point{'s' * (total != 1)}: "
+        + ", ".join(f"{n} {kind}" for kind, n in counts.items())
+        + f"; current code: {produced_by(provenance)}"
+    )
+    if counts[FRESH] == total:
+        lines.append("every point is fresh: a run would reuse them all")
+    else:
+        lines.append(f"a run would compute {total - counts[FRESH]} of them (the stale, missing "
+                     "and unfinished ones)")  # fmt: skip
     return "\n".join(lines)

@@ -9,9 +9,25 @@ cluster whose nodes share no file system still gathers every file. Then ``out/sw
 ``out/sweep.csv`` and ``out/sweep.png`` are written from the records
 (:mod:`drake_abs.parallel.sweep_gather`), by the same code for both backends.
 
-- Resume: a point whose ``point.json`` says "done" for the same values and the same function
-  (its description) is not recomputed; failed and missing points are. ``resume=False``
-  recomputes everything.
+- Provenance: every ``point.json`` records what produced the point: the function's
+  description, the point's whole resolved configuration (when ``fn`` has a
+  ``resolved_config(values)`` method, as :class:`drake_abs.experiments.sweep.ExperimentPoint`
+  has: the experiment's Config with the point's values applied) and the provenance of the
+  process that ran it (:func:`drake_abs.parallel.provenance.provenance`: the drake-abs version,
+  the git commit and a dirty flag when run from a checkout, the versions of the libraries that
+  compute the numbers). ``sweep.json`` records the provenance of the process that gathered it.
+- Resume: a point whose ``point.json`` says "done" is reused only when all of it matches what
+  this run would record: its values, the function's description, the resolved configuration,
+  the drake-abs version and every dependency version. The commit is recorded and shown but
+  not compared: the package version is the release key (reuse a point only when its whole
+  Config and package version match), so edits on a checkout between releases do not recompute
+  finished points; ``resume=False`` (``drake-abs sweep --fresh``) recomputes after such edits.
+  A point whose record differs is recomputed, and says why (its
+  :class:`~drake_abs.parallel.sweep_points.PointResult`'s ``recomputed_because``, also in
+  ``sweep.json``: ``config.eps: 99 != 0.25``, ``numpy: 2.1.0 != 2.2.1``); failed and missing
+  points are recomputed.
+  :func:`check_sweep` tells, without running anything, what a run would do with every point
+  (:class:`PointState`: fresh, stale, missing or unfinished).
 - Faults: an exception in ``fn`` is caught where it runs; the point is recorded as failed with
   the full traceback and the rest of the sweep completes (:attr:`SweepResult.failures`). On Ray,
   a point whose worker process dies is retried up to ``max_retries`` times, then recorded as
@@ -22,7 +38,9 @@ cluster whose nodes share no file system still gathers every file. Then ``out/sw
 ``fn`` must be picklable for Ray: a module-level function, or an instance of a module-level class
 (e.g. :class:`drake_abs.experiments.sweep.ExperimentPoint`), importable on the workers. It may
 have a ``describe()`` method returning a JSON-able description (recorded; a changed description
-means no reuse); otherwise its qualified name (or ``repr``) describes it.
+means no reuse); otherwise its qualified name (or ``repr``) describes it. It may have a
+``resolved_config(values)`` method returning the point's whole configuration (JSON-able;
+recorded and compared the same way).
 """
 
 from __future__ import annotations
@@ -33,10 +51,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drake_abs.parallel import provenance as _provenance
 from drake_abs.parallel.sweep_gather import gather
 from drake_abs.parallel.sweep_points import (
     PointResult,
     canonical,
+    differences,
     execute_point,
     jsonable,
     lost_point,
@@ -55,7 +75,8 @@ class SweepResult:
     """A finished sweep: its folder, every point in the grid's order (see
     :class:`~drake_abs.parallel.sweep_points.PointResult`), the gathered files (name -> path:
     ``json``, ``csv`` and, if there was a numeric metric, ``png``), the metric plotted, and why a
-    requested metric could not be plotted (``metric_error``, else None)."""
+    requested metric could not be plotted (``metric_error``, else None), and the provenance of
+    the process that ran the sweep (:func:`drake_abs.parallel.provenance.provenance`)."""
 
     out: Path
     description: Any
@@ -65,6 +86,7 @@ class SweepResult:
     metric: str | None
     metric_error: str | None = None
     seed_key: str = "seed"
+    provenance: dict | None = None
 
     @property
     def failures(self) -> list[PointResult]:
@@ -80,6 +102,117 @@ class SweepResult:
     def reused(self) -> list[PointResult]:
         """The points whose earlier "done" record was used."""
         return [p for p in self.points if p.reused]
+
+    @property
+    def recomputed(self) -> list[PointResult]:
+        """The points computed although they had an earlier record (stale, or failed), each
+        with its ``recomputed_because``."""
+        return [p for p in self.points if p.recomputed_because]
+
+
+#: What a run would do with a point (``PointState.state``), in this order: reuse it; recompute
+#: it because its record differs; compute it (no folder); compute it again (it failed, or its
+#: record is missing or unreadable, e.g. interrupted while it was stored).
+FRESH, STALE, MISSING, UNFINISHED = "fresh", "stale", "missing", "unfinished"
+
+
+@dataclass(frozen=True)
+class PointState:
+    """A point of a sweep as a run would find it (:func:`check_sweep`): ``state`` is one of
+    ``"fresh"`` (its record matches: reused), ``"stale"`` (done, but its record differs:
+    ``reasons``, each ``FIELD: RECORDED != CURRENT``), ``"missing"`` (no folder) or
+    ``"unfinished"`` (failed, or no readable ``point.json``: ``reasons`` says which); ``record``
+    is its ``point.json`` (None if there is none)."""
+
+    name: str
+    values: dict
+    folder: Path
+    state: str
+    reasons: tuple[str, ...] = ()
+    record: dict | None = None
+
+    @property
+    def reason(self) -> str:
+        """The reasons as one text (``"config.eps: 99 != 0.25; numpy: 2.1.0 != 2.2.1"``)."""
+        return "; ".join(self.reasons)
+
+
+def resolved_config(fn: Callable, values: Mapping[str, Any]) -> tuple[Any, str | None]:
+    """The point's whole configuration as ``fn.resolved_config(values)`` gives it (JSON-able;
+    None when ``fn`` has no such method), and why it could not be built (None when it could)."""
+    method = getattr(fn, "resolved_config", None)
+    if not callable(method) or isinstance(fn, type):
+        return None, None
+    try:
+        return jsonable(method(dict(values))), None
+    except Exception as err:
+        return None, f"its configuration cannot be built: {type(err).__name__}: {err}"
+
+
+def point_state(
+    folder: Path,
+    name: str,
+    values: Mapping[str, Any],
+    *,
+    description: Any,
+    config: Any,
+    current: Mapping[str, Any],
+    config_error: str | None = None,
+) -> PointState:
+    """What a run would do with the point ``name`` in ``folder`` (see :class:`PointState`):
+    its ``point.json`` is compared with what this run would record: the values, the function's
+    ``description``, the resolved ``config`` (None: not known, e.g. ``fn`` has no
+    ``resolved_config``; ``config_error``: it could not be built, so the point is never fresh)
+    and the ``current`` provenance (:func:`drake_abs.parallel.provenance.differences`: the
+    drake-abs version and the dependencies count, the commit does not)."""
+    folder = Path(folder)
+    record = read_point(folder)
+
+    def state(kind: str, *reasons: str) -> PointState:
+        return PointState(name, dict(values), folder, kind, tuple(reasons), record)
+
+    if record is None:
+        if not folder.exists():
+            return state(MISSING)
+        return state(UNFINISHED, "no readable point.json (interrupted while it was stored?)")
+    if record.get("status") != "done":
+        error = record.get("error") if isinstance(record.get("error"), dict) else {}
+        message = (str(error.get("message") or "")).strip().splitlines()
+        return state(UNFINISHED, f"{record.get('status')}: {error.get('type')}: "
+                                 f"{message[0] if message else ''}".rstrip(": "))  # fmt: skip
+    reasons = []
+    if record.get("name") != name:
+        reasons.append(f"name: {record.get('name')!r} != {name!r}")
+    reasons += differences(record.get("values"), jsonable(values), "values")
+    reasons += differences(record.get("fn"), description, "fn")
+    if config_error is not None:
+        reasons.append(config_error)
+    elif "config" not in record:
+        if config is not None:
+            reasons.append("config: not recorded")
+    else:
+        reasons += differences(record["config"], config, "config")
+    reasons += _provenance.differences(record.get("provenance"), current)
+    return state(STALE if reasons else FRESH, *reasons)
+
+
+def check_sweep(
+    fn: Callable[[dict, Path], Mapping],
+    points: Sequence[Mapping[str, Any]],
+    out: str | Path,
+) -> list[PointState]:
+    """What :func:`run_sweep` with these arguments (and ``resume=True``) would do with every
+    point, in the grid's order, without running or writing anything (see :class:`PointState`).
+    ``fn``, ``points`` and ``out`` are checked as :func:`run_sweep` checks them."""
+    out = _validate(fn, "local", None, None, 0, out)
+    points = validate_points(points)
+    description, current = describe(fn), _provenance.provenance()
+    states = []
+    for name, values in zip(point_names(points), points, strict=True):
+        config, error = resolved_config(fn, values)
+        states.append(point_state(out / "points" / name, name, values, description=description,
+                                  config=config, current=current, config_error=error))  # fmt: skip
+    return states
 
 
 def describe(fn: Callable) -> Any:
@@ -186,7 +319,8 @@ def run_sweep(
         address: Ray only: a cluster to join (None: start a local one on 127.0.0.1, or use the
             Ray this process already initialised); see :func:`drake_abs.parallel.cluster.connect`.
         num_cpus: Ray only: the CPUs of a local cluster started here (default: all).
-        resume: reuse the records of points already done in ``out``; False recomputes all.
+        resume: reuse the records of points already done in ``out`` whose record matches (see
+            the module doc); False recomputes all.
         progress: a progress bar over the points (tqdm, stderr).
         max_retries: Ray only: how often a point whose worker process died is run again.
         metric: the numeric column of sweep.csv to plot (default: the first numeric summary
@@ -203,28 +337,32 @@ def run_sweep(
     points = validate_points(points)
     remove_stale_folders()  # temporary folders of points whose sweep was killed
     names = point_names(points)
-    description = describe(fn)
+    description, current = describe(fn), _provenance.provenance()
+    configs = [resolved_config(fn, values) for values in points]
     (out / "points").mkdir(parents=True, exist_ok=True)
     results: list[PointResult | None] = [None] * len(points)
+    because: list[str | None] = [None] * len(points)
     todo = []
     for i, (name, values) in enumerate(zip(names, points, strict=True)):
         folder = out / "points" / name
-        record = read_point(folder) if resume else None
-        if (
-            record is not None
-            and record.get("status") == "done"
-            and record.get("name") == name
-            and record.get("values") == jsonable(values)
-            and record.get("fn") == description
-        ):
-            results[i] = PointResult.from_record(record, values, folder, reused=True)
+        if not resume:
+            todo.append(i)
+            continue
+        found = point_state(folder, name, values, description=description,
+                            config=configs[i][0], current=current,
+                            config_error=configs[i][1])  # fmt: skip
+        if found.state == FRESH:
+            results[i] = PointResult.from_record(found.record, values, folder, reused=True)
         else:
             todo.append(i)
+            because[i] = f"{found.state}: {found.reason}" if found.reasons else None
 
     def finished(i: int, result: dict) -> None:
         folder = out / "points" / names[i]
-        record = store_point(folder, names[i], points[i], result, description)
-        results[i] = PointResult.from_record(record, points[i], folder, reused=False)
+        record = store_point(folder, names[i], points[i], result, description,
+                             config=configs[i][0])  # fmt: skip
+        results[i] = PointResult.from_record(record, points[i], folder, reused=False,
+                                             recomputed_because=because[i])  # fmt: skip
 
     bar = _bar(len(points), len(points) - len(todo), progress, description)
     try:
@@ -239,11 +377,11 @@ def run_sweep(
         bar.close()
     recorded = [r for r in results if r is not None]
     gathered = gather(out, recorded, description=description, backend=backend, seed_key=seed_key,
-                      metric=metric)  # fmt: skip
+                      metric=metric, provenance=current)  # fmt: skip
     return SweepResult(
         out=out, description=description, backend=backend, points=recorded,
         files=gathered["files"], metric=gathered["metric"],
-        metric_error=gathered["metric_error"], seed_key=seed_key,
+        metric_error=gathered["metric_error"], seed_key=seed_key, provenance=current,
     )  # fmt: skip
 
 

@@ -4,8 +4,11 @@ The same function gathers every sweep, whichever backend computed its points, fr
 records alone (:class:`~drake_abs.parallel.sweep_points.PointResult`), so a sweep computed on Ray
 gathers into the same files as one computed in this process.
 
-- ``sweep.json``: the function's description, the grid (keys, seeds, configurations), and every
-  point: name, folder, values, status, summary or error (with its traceback), seconds.
+- ``sweep.json``: the function's description, the provenance of the process that gathered it
+  (:mod:`drake_abs.parallel.provenance`), the grid (keys, seeds, configurations), and every
+  point: name, folder, values, status, summary or error (with its traceback), seconds, whether
+  it was reused, why an earlier record of it was not (``recomputed_because``), and the
+  provenance its ``point.json`` records.
 - ``sweep.csv``: one row per point, in the grid's order: ``point`` (its folder name), the values'
   columns, ``status``, ``error`` (type and message of a failed point), then the summaries'
   scalar leaves (int, float, bool, str) with dotted keys (``curves.exact.variance.0``): nested
@@ -168,11 +171,14 @@ def gather(
     backend: str,
     seed_key: str = "seed",
     metric: str | None = None,
+    provenance: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write ``out/sweep.csv``, ``out/sweep.png`` (when there is a numeric metric) and
     ``out/sweep.json``. ``metric`` names a numeric column of sweep.csv (default:
-    :func:`choose_metric`). Returns ``files`` (name -> path), ``metric`` (the one plotted, or
-    None) and ``metric_error`` (why the requested metric could not be plotted, or None)."""
+    :func:`choose_metric`); ``provenance`` is recorded in sweep.json as the gathering process's
+    (:func:`drake_abs.parallel.provenance.provenance`). Returns ``files`` (name -> path),
+    ``metric`` (the one plotted, or None) and ``metric_error`` (why the requested metric could
+    not be plotted, or None)."""
     out = Path(out)
     columns, rows = table(points)
     keys = list(dict.fromkeys(k for p in points for k in p.values))
@@ -197,6 +203,7 @@ def gather(
                                if seed_key in p.values))  # fmt: skip
     document = {
         "fn": description,
+        "provenance": jsonable(provenance),
         "backend": backend,
         "grid": {
             "points": len(points),
@@ -230,4 +237,5 @@ def _point_entry(p: PointResult, out: Path) -> dict[str, Any]:
     }
     entry.update({"summary": p.summary} if p.status == "done" else {"error": p.error})
     entry.update({"seconds": p.seconds, "reused": p.reused})
+    entry.update({"recomputed_because": p.recomputed_because, "provenance": p.provenance})
     return entry

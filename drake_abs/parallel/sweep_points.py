@@ -13,6 +13,10 @@ on whichever machine executes it; it returns the summary (JSON-safe) and the byt
 what the driver does with that: it writes the files into ``out/points/<name>/`` (paths that named
 the temporary folder, in the summary and in text files, are rewritten to name that folder) and
 ``point.json`` last, atomically, so a ``point.json`` that says ``done`` means every file is there.
+The record says what produced the point: the function's description, the point's whole resolved
+configuration when the function can tell it, and the provenance (drake-abs version, commit,
+dependency versions: :mod:`drake_abs.parallel.provenance`) of the process that ran it.
+:func:`differences` says how two records' fields differ, field by field.
 
 A point's temporary folder is removed when it ends, also when it is interrupted (Ctrl-C); one
 left by a process that was killed is removed when the next sweep starts
@@ -134,7 +138,10 @@ class PointResult:
     """One point's outcome as the driver knows it: ``status`` is "done" (``summary`` set) or
     "failed" (``error``: type, message, traceback); ``seconds`` is the wall time of its function
     (None if unknown); ``reused`` says it was read from a previous run's ``point.json`` instead
-    of computed; ``folder`` is ``out/points/<name>``."""
+    of computed; ``folder`` is ``out/points/<name>``; ``provenance`` is what its record says
+    produced it (None for a record without one); ``recomputed_because`` says why an earlier
+    record of the point was not reused (e.g. ``config.eps: 99 != 0.25``), None when there was
+    none or it was reused."""
 
     name: str
     values: dict
@@ -144,14 +151,26 @@ class PointResult:
     seconds: float | None
     reused: bool
     folder: Path
+    provenance: dict | None = None
+    recomputed_because: str | None = None
 
     @classmethod
-    def from_record(cls, record: dict, values: Mapping, folder: Path, reused: bool):
+    def from_record(
+        cls,
+        record: dict,
+        values: Mapping,
+        folder: Path,
+        reused: bool,
+        recomputed_because: str | None = None,
+    ):
         """From a ``point.json`` record (written by :func:`store_point`)."""
+        provenance = record.get("provenance")
         return cls(
             name=record["name"], values=dict(values), status=record["status"],
             summary=record.get("summary"), error=record.get("error"),
             seconds=record.get("seconds"), reused=reused, folder=Path(folder),
+            provenance=provenance if isinstance(provenance, dict) else None,
+            recomputed_because=recomputed_because,
         )  # fmt: skip
 
 
@@ -164,8 +183,10 @@ def execute_point(fn: Callable[[dict, Path], Mapping], values: Mapping[str, Any]
     (``type``, ``message``, ``traceback``: the full text of ``traceback.format_exc()``),
     ``seconds`` (wall time of ``fn``), ``files`` (path relative to the folder, in POSIX form ->
     bytes, every file ``fn`` wrote, also when it raised), ``temp_folders`` (the folder's paths,
-    to be rewritten) and ``host``. An exception from ``fn`` is caught here; only the death of
-    the process itself escapes."""
+    to be rewritten), ``host`` and ``provenance`` (of this process, taken before ``fn`` runs:
+    :func:`drake_abs.parallel.provenance.provenance`). An exception from ``fn`` is caught here;
+    only the death of the process itself escapes."""
+    produced_by = _provenance()
     raw = tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}{os.getpid()}-")
     folder = Path(raw).resolve()
     start = time.perf_counter()
@@ -192,7 +213,18 @@ def execute_point(fn: Callable[[dict, Path], Mapping], values: Mapping[str, Any]
         shutil.rmtree(folder, ignore_errors=True)
     result["temp_folders"] = sorted({raw, str(folder)}, key=len, reverse=True)
     result["host"] = socket.gethostname()
+    result["provenance"] = produced_by
     return result
+
+
+def _provenance() -> dict | None:
+    """This process's provenance; None should reading it ever fail (it is not meant to)."""
+    from drake_abs.parallel.provenance import provenance
+
+    try:
+        return provenance()
+    except Exception:
+        return None
 
 
 def remove_stale_folders(root: str | Path | None = None) -> list[Path]:
@@ -232,7 +264,7 @@ def lost_point(err: BaseException) -> dict:
     retries allow, or its function could not be loaded there): failed, with the error."""
     trace = "".join(traceback.format_exception(err))
     return {"status": "failed", "error": error_record(err, trace), "seconds": math.nan,
-            "files": {}, "temp_folders": [], "host": None}  # fmt: skip
+            "files": {}, "temp_folders": [], "host": None, "provenance": None}  # fmt: skip
 
 
 # --------------------------------------------------------------------------------- the records
@@ -292,12 +324,18 @@ def _umask() -> int:
 
 
 def store_point(
-    folder: Path, name: str, values: Mapping[str, Any], result: dict, description: Any
+    folder: Path,
+    name: str,
+    values: Mapping[str, Any],
+    result: dict,
+    description: Any,
+    config: Any = None,
 ) -> dict:
     """Write one executed point into ``folder`` (``out/points/<name>``), replacing what was
-    there: its files, then ``point.json``. ``result`` is :func:`execute_point`'s; returns the
-    record written to ``point.json`` (name, status, values, fn, summary or error, seconds, files,
-    host)."""
+    there: its files, then ``point.json``. ``result`` is :func:`execute_point`'s; ``config`` the
+    point's whole resolved configuration (JSON-able; None when the function cannot tell it).
+    Returns the record written to ``point.json`` (name, status, values, fn, config, provenance,
+    summary or error, seconds, files, host)."""
     folder = Path(folder)
     (folder / POINT_FILE).unlink(missing_ok=True)  # no "done" record while the files change
     if folder.exists():
@@ -315,6 +353,8 @@ def store_point(
         "status": result["status"],
         "values": jsonable(values),
         "fn": description,
+        "config": jsonable(config),
+        "provenance": result.get("provenance"),
     }
     if result["status"] == "done":
         record["summary"] = _relocate(result["summary"], old, new)
@@ -335,3 +375,39 @@ def read_point(folder: Path) -> dict | None:
     except (OSError, ValueError):
         return None
     return record if isinstance(record, dict) else None
+
+
+# ---------------------------------------------------------------------------------- differences
+
+#: Longest text of one value in a reason; longer ones are cut with an ellipsis.
+MAX_VALUE_TEXT = 60
+_ABSENT = object()
+
+
+def _shown(value: Any) -> str:
+    if value is _ABSENT:
+        return "not recorded"
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= MAX_VALUE_TEXT else text[: MAX_VALUE_TEXT - 3] + "..."
+
+
+def differences(recorded: Any, current: Any, path: str) -> list[str]:
+    """How a recorded JSON value differs from the current one, one reason per differing leaf,
+    each reading ``PATH: RECORDED != CURRENT`` with dotted paths into dicts and the values as
+    JSON (cut to :data:`MAX_VALUE_TEXT` characters): ``config.eps: 99 != 0.25``,
+    ``config.solver.tol: not recorded != 1e-08``, ``config.old: 3 != not recorded``. Values
+    are compared as canonical JSON text, so a NaN equals a NaN and a tuple its list. Empty when
+    they are equal."""
+    if isinstance(recorded, Mapping) and isinstance(current, Mapping):
+        reasons = []
+        for key in dict.fromkeys([*current, *recorded]):
+            old, new = recorded.get(key, _ABSENT), current.get(key, _ABSENT)
+            if old is _ABSENT or new is _ABSENT:
+                reasons.append(f"{path}.{key}: {_shown(old)} != {_shown(new)}")
+            else:
+                reasons += differences(old, new, f"{path}.{key}")
+        return reasons
+    same = json.dumps(jsonable(recorded), sort_keys=True) == json.dumps(
+        jsonable(current), sort_keys=True
+    )
+    return [] if same else [f"{path}: {_shown(recorded)} != {_shown(current)}"]

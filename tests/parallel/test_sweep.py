@@ -117,8 +117,11 @@ def _csv(out: Path) -> list[dict]:
 
 
 def _points(out: Path) -> list[dict]:
+    """The points of sweep.json without what differs between two runs of the same points: the
+    reuse, and the provenance (a commit or an edit may come between them)."""
     doc = json.loads((out / "sweep.json").read_text())
-    return [_untimed({k: v for k, v in p.items() if k != "reused"}, out) for p in doc["points"]]
+    drop = ("reused", "provenance")
+    return [_untimed({k: v for k, v in p.items() if k not in drop}, out) for p in doc["points"]]
 
 
 def _files(out: Path) -> dict[str, list[str]]:
@@ -406,26 +409,3 @@ def test_sweep_help_is_plain_text(capsys):
     assert text.startswith("usage: drake-abs sweep") and "--seeds" in text and "--ray" in text
     assert not any(mark in text for mark in ("`", "**", ":func:", ":class:"))
     assert "sweep" in cli.__doc__
-
-
-def test_an_experiment_point_is_described_by_its_whole_config_and_the_version(monkeypatch):
-    """A finished point is reused only for the same description: a changed default of the
-    Config (not among the point's values) or another drake-abs version must change it."""
-    import dataclasses
-    import importlib.metadata
-
-    from drake_abs.experiments.catalog import experiment_module
-
-    point = ExperimentPoint("gradient-variance", test_size=True)
-    base = point.describe()
-    assert base["config"]["samples"] == point.base_config().samples
-    assert base["drake_abs_version"] == importlib.metadata.version("drake-abs")
-    module = experiment_module("gradient-variance")
-    small = module.Config.test_size()
-    bigger = dataclasses.replace(small, samples=small.samples + 1)
-    monkeypatch.setattr(module.Config, "test_size", classmethod(lambda cls: bigger))
-    assert point.describe() != base
-    monkeypatch.undo()
-    assert point.describe() == base
-    monkeypatch.setattr(importlib.metadata, "version", lambda name: "9.9.9")
-    assert point.describe()["drake_abs_version"] == "9.9.9" != base["drake_abs_version"]
