@@ -23,7 +23,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 test: lint
-	$(PY) -m pytest tests --nbmake notebooks -q --durations=25
+	$(PY) -m pytest tests --nbmake notebooks -q -n 2 --durations=25
 
 # The API reference (docs/api, generated from the docstrings) and docs/*.md, as HTML in
 # docs/_build/html. Warnings are errors (-W), references are checked (-n), and every page is read
@@ -53,7 +53,7 @@ lock:
 	$(VENV)/bin/drake-abs precompile
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest tests --nbmake notebooks -q --durations=25
+	$(PY) -m pytest tests --nbmake notebooks -q -n 2 --durations=25
 	@echo "# The versions 'make test' last passed with (Python $$($(PY) -c 'import platform; print(platform.python_version())'), Linux x86_64)." > $(CONSTRAINTS).new
 	@echo "# Regenerate with 'make lock'; pyproject.toml keeps the supported ranges." >> $(CONSTRAINTS).new
 	$(PY) -m pip freeze --all --exclude-editable | grep -v '^-e ' >> $(CONSTRAINTS).new
