@@ -146,13 +146,15 @@ def _print_report(report: str, folder: Path) -> None:
 
 def _run_demo(out: Path, *, duration: float | None, meshcat: bool) -> int:
     from drake_abs.experiments.bouncing_ball import Config, report, run
-    from drake_abs.experiments.outputs import results_dir
+    from drake_abs.experiments.outputs import results_dir, write_provenance
 
     kwargs = {"meshcat": meshcat}
     if duration is not None:
         kwargs["duration"] = duration
     folder = results_dir("demo", out)
-    _print_report(report(run(Config(**kwargs), folder)), folder)
+    summary = run(Config(**kwargs), folder)
+    write_provenance(folder, "demo", Config(**kwargs))
+    _print_report(report(summary), folder)
     return 0
 
 
@@ -162,6 +164,7 @@ def _run_standard(name: str, out: Path | None, *, test_size: bool, ray: bool = F
     """Run one experiment (``config``, default its Config or test size); with ``ray`` its
     estimators' rollouts go to a :class:`~drake_abs.parallel.RayRunner` (the same numbers, see
     drake_abs.parallel)."""
+    from drake_abs.experiments import outputs
     from drake_abs.experiments.outputs import default_out
 
     module = experiment_module(name)
@@ -182,6 +185,7 @@ def _run_standard(name: str, out: Path | None, *, test_size: bool, ray: bool = F
                       "tasks")  # fmt: skip
         finally:
             shutdown()
+    outputs.write_provenance(folder, f"experiment {name}", config)
     _print_report(module.report(summary), folder)
     return 0
 
@@ -493,6 +497,7 @@ def _train(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     its report."""
     import importlib.util
 
+    from drake_abs.experiments import outputs
     from drake_abs.experiments.train import base_settings, default_out, report, train
     from drake_abs.policy.methods import method as registry_method
 
@@ -510,6 +515,9 @@ def _train(sub: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     out = default_out(args.task, args.method, args.seed) if args.out is None else Path(args.out)
     summary = train(args.task, args.method, steps=args.steps, seed=args.seed, out=out,
                     settings=settings)  # fmt: skip
+    outputs.write_provenance(Path(summary["files"]["summary"]).parent,
+                             f"train {args.task} --method {args.method} --seed {args.seed} "
+                             f"--steps {args.steps}", settings)  # fmt: skip
     _print_report(report(summary), Path(summary["files"]["summary"]).parent)
     return 0
 

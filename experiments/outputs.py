@@ -19,6 +19,7 @@ import os
 import sys
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 #: The folder (relative to the current directory) that holds every experiment's default output.
 RESULTS = Path("results")
@@ -156,3 +157,18 @@ def write_json(path: str | Path, data, indent: int = 2, finite: bool = False) ->
         text = json.dumps(json.loads(text, parse_constant=lambda _: None), indent=indent)
     Path(path).write_text(text)
     return Path(path)
+
+
+def write_provenance(folder: str | Path, command: str, config: Any = None) -> Path:
+    """Write ``provenance.json`` to ``folder``: what produced the results there. ``command``
+    (e.g. ``"experiment gradient-variance"``), the whole resolved ``config`` (a dataclass,
+    every default included) and :func:`drake_abs.parallel.provenance.provenance` (the drake-abs
+    version, the git commit and whether the tree had uncommitted changes, the versions of the
+    libraries that compute the numbers). Returns the path."""
+    import dataclasses
+
+    from drake_abs.parallel.provenance import provenance
+
+    resolved = dataclasses.asdict(config) if dataclasses.is_dataclass(config) else config
+    record = {"command": command, "config": json.loads(json.dumps(resolved, default=str))}
+    return write_json(Path(folder) / "provenance.json", record | provenance())

@@ -1,6 +1,7 @@
 """The paper 003 reproduction at CI size: the CLI runs it and it writes its figures, summary and
 Meshcat page; the report sets our numbers beside the paper's; seeded runs repeat exactly."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -30,6 +31,11 @@ def test_cli_runs_the_experiment_at_test_size_and_writes_its_files(tmp_path, cap
     assert ours["suboptimality"] == pytest.approx(ours["trained"] / ours["exact_model"] - 1)
     assert summary["comparison"]["paper"]["suboptimality"] == pytest.approx(1111.71 / 1103.04 - 1)
     assert summary["sysid"]["rank"] == 16
+    record = json.loads((tmp_path / "provenance.json").read_text())
+    assert record["command"] == "experiment mpc-quadcopter"
+    assert record["config"]["iterations"] == config.iterations  # the whole test-size Config
+    assert set(record["config"]) == {f.name for f in dataclasses.fields(Config)}
+    assert record["dependencies"]["numpy"] == np.__version__
 
 
 def test_seeded_runs_repeat_exactly(tmp_path):

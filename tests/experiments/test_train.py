@@ -40,6 +40,12 @@ def test_train_writes_a_policy_file_and_a_summary_after_the_budget(tmp_path, cap
     assert int(file.metadata["training_steps"]) == summary["env_steps"]
     action = file.output(np.zeros(file.n_obs))
     assert action.shape == (file.nu,) and np.all(np.isfinite(action))
+    # what produced it: the command, the resolved settings, the versions
+    record = json.loads((out / "provenance.json").read_text())
+    assert record["command"].startswith("train hopper --method fopg_episode_abs --seed 3")
+    assert record["config"] == record["config"] | summary["settings"]  # all of them, and more
+    assert {"ars", "sb3_envs"} <= set(record["config"])  # the settings the method leaves unused
+    assert record["drake_abs_version"] and record["dependencies"]["drake"]
 
 
 def test_ars_starts_from_the_published_settings_of_the_task_and_set_changes_one():
