@@ -1,21 +1,28 @@
-"""Sphinx configuration: the drake-abs API reference, built from the docstrings.
+"""Sphinx configuration: the drake-abs documentation site, with the API reference built from the
+docstrings.
 
-Build with ``make docs`` (``sphinx-build -W --keep-going -b html -n docs docs/_build/html``):
+Build with ``make docs`` (``sphinx-build -E -W --keep-going -b html -n docs docs/_build/html``):
 warnings are errors, and the build is nitpicky (``-n``), so every cross-reference into
 drake-abs itself must resolve. References to *external* types (numpy, scipy, pydrake, numba,
 the standard library beyond the builtins) cannot resolve, since the build has no network and so
 no intersphinx inventories; ``nitpick_ignore_regex`` below ignores those targets only, never a
 ``drake_abs`` one.
 
-Layout: ``index.md`` (MyST), the existing ``math.md`` and ``architecture.md``, and ``api/``,
-where ``sphinx.ext.autosummary`` generates one page per public module (recursively; modules
-whose names start with an underscore are left out) from ``_templates/autosummary/module.rst``.
+Layout (``index.md`` has the table of contents): ``tutorials/`` (the notebooks, rendered by
+myst-nb without executing them: ``make test`` runs them), ``howto/``, ``reference/`` (with
+``api/``, where ``sphinx.ext.autosummary`` generates one page per public module, recursively,
+from ``_templates/autosummary/module.rst``; modules whose names start with an underscore are left
+out), ``explanations/`` and, at the top, ``math.md``, ``architecture.md``, ``policy_files.md`` and
+``drake_users.md``. Pages are MyST Markdown; ``tests/test_docs.py`` runs every ``python`` block of
+every page, as ``tests/test_readme.py`` does the README's.
+
 Each object is documented once, at the module that defines it: autodoc ignores ``__all__`` and
 imported names, so a package page lists what it re-exports without describing it twice, and
 ``_ext/drake_abs_sphinx.py`` resolves a reference to a re-exported name (``drake_abs.LCS``) to
 the defining module's entry. The same extension renders Drake's ``.. pydrake_system::`` port
 blocks and documents ``TemplateSystem.define`` LeafSystems (``LcsPlant`` = ``LcsPlant_[float]``)
-with their constructor's real signature.
+with their constructor's real signature. ``_ext/drake_abs_reference.py`` generates the command
+line's help and the scene schema's tables from the code, and copies the notebooks in.
 """
 
 from __future__ import annotations
@@ -41,13 +48,14 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
-    "myst_parser",
+    "myst_nb",  # MyST Markdown pages (it includes myst_parser) and the notebooks
     "drake_abs_sphinx",
+    "drake_abs_reference",
 ]
 
-source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 root_doc = "index"
-exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "**/.ipynb_checkpoints"]
 templates_path = ["_templates"]
 
 # -- autodoc / autosummary / napoleon ---------------------------------------------------------
@@ -93,14 +101,19 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(drake_abs\.)?([\w.]+\.)?_\w+(\.\w+)*"),
 ]
 
-# -- MyST (math.md, architecture.md, index.md) ------------------------------------------------
+# -- MyST and myst-nb (the pages and the notebooks) --------------------------------------------
 myst_heading_anchors = 3
 suppress_warnings = []
+# The notebooks are rendered as stored (outputs cleared), never executed here: ``make test`` runs
+# them (nbmake), and executing them would make the docs build take as long as the tests.
+nb_execution_mode = "off"
+nb_merge_streams = True
 
 # -- HTML ---------------------------------------------------------------------------------------
 html_theme = "alabaster"
 html_title = f"drake-abs {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["drake_abs.css"]  # tables wrap to the page width
 html_theme_options = {
     "description": "Adaptive barrier smoothing: first-order gradients through contact, "
     "as Drake systems",

@@ -158,12 +158,16 @@ class SceneModel:
             friction: replaces the scene's friction formulation (``"stewart_trinkle"`` or
                 ``"anitescu"``).
             solver_options: the switches of :class:`ComplementarityStepper`
-                (``joint_limits``, ``damping``, ``springs``, ``joint_friction``) and the
+                (``joint_limits``, ``damping``, ``springs``: True (default) takes the
+                scene's ``joint_springs``, ``joint_friction``) and the
                 interior-point solver's options (``tol``, ``max_iterations``, ``exact_tol``,
                 ``strict``). Any other name is refused here (:func:`check_stepper_keywords`);
                 a scene setting such as ``time_step`` is changed in the scene.
         """
         check_stepper_keywords(solver_options, self.scene, "SceneModel.stepper")
+        springs = solver_options.get("springs", True)
+        if springs is True:  # the scene's treatment of its springs
+            springs = self.scene.joint_springs
         stepper = ComplementarityStepper(
             self.contact_model,
             self.scene.make_smoothing() if smoothing is None else smoothing,
@@ -171,7 +175,7 @@ class SceneModel:
             self.scene.activation_distance if activation_distance is None else activation_distance,
             self.scene.friction_model if friction is None else friction,
             compliance=scene_compliance(self.scene, self.contact_model),
-            **{"joint_friction": self.joint_friction, **solver_options},
+            **{"joint_friction": self.joint_friction, **solver_options, "springs": springs},
         )
         stepper.scene, stepper.rebuild = self.scene, rebuild_stepper  # picklable
         return stepper

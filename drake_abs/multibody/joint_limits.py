@@ -103,7 +103,20 @@ def joint_damping(plant: MultibodyPlant) -> np.ndarray:
     return damping
 
 
-def joint_springs(plant: MultibodyPlant) -> JointSprings:
+def spring_integration(springs: bool | str) -> str | bool:
+    """The joint springs' treatment a stepper's ``springs`` argument asks for: ``"implicit"``
+    (True or "implicit"), ``"explicit"``, or False (no springs); a ValueError naming the
+    argument otherwise."""
+    if springs is True or springs == "implicit":
+        return "implicit"
+    if springs is False:
+        return False
+    if springs == "explicit":
+        return "explicit"
+    raise ValueError(f"springs must be True, False, 'implicit' or 'explicit'; got {springs!r}")
+
+
+def joint_springs(plant: MultibodyPlant, implicit: bool = True) -> JointSprings:
     """The plant's joint springs per velocity (:class:`~drake_abs.contact.damping.JointSprings`):
     every ``RevoluteSpring`` and ``PrismaticSpring`` force element (an SDF joint's
     ``spring_stiffness``, an MJCF joint's ``stiffness``: see
@@ -111,7 +124,8 @@ def joint_springs(plant: MultibodyPlant) -> JointSprings:
     stiffness (N m / rad or N / m) and nominal position (rad or m). Several springs on one joint
     add up (their stiffnesses, and the stiffness-weighted mean of their references). Every
     one-velocity, one-position joint has its position coordinate in ``q_index`` (so that a
-    stiffness can be given to it later); other velocities have -1."""
+    stiffness can be given to it later); other velocities have -1. ``implicit``: the springs'
+    treatment in the step (:class:`~drake_abs.contact.damping.JointSprings`)."""
     nv = plant.num_velocities()
     stiffness, moment, q_index = np.zeros(nv), np.zeros(nv), np.full(nv, -1, dtype=np.int64)
     for j in plant.GetJointIndices():
@@ -130,7 +144,7 @@ def joint_springs(plant: MultibodyPlant) -> JointSprings:
         stiffness[v] += k
         moment[v] += k * ref
     reference = np.divide(moment, stiffness, out=np.zeros(nv), where=stiffness > 0)
-    return JointSprings(stiffness, reference, q_index)
+    return JointSprings(stiffness, reference, q_index, implicit)
 
 
 def effort_limits(plant: MultibodyPlant) -> np.ndarray:

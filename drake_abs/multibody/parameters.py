@@ -246,7 +246,7 @@ def with_values(
         for joint, v in spring_joints:
             stiffness[v] = value[f"stiffness[{joint}]"]
             reference[v] = value[f"springref[{joint}]"]
-        springs = JointSprings(stiffness, reference, springs.q_index)
+        springs = JointSprings(stiffness, reference, springs.q_index, springs.implicit)
     return model, damping, springs, changed
 
 
@@ -359,7 +359,9 @@ def damping_columns(
 
     - ``dW'/dD_j = -h W' e_j e_j' W'``, ``dv_free'/dD_j = -h W' e_j v_free'_j``;
     - ``dW'/dK_j = h dW'/dD_j``, ``dv_free'/dK_j = -h W' e_j (h v_free'_j + q_i - q_ref,j)``;
-    - ``dv_free'/dq_ref,j = h K_j W' e_j`` (W' does not move)
+    - ``dv_free'/dq_ref,j = h K_j W' e_j`` (W' does not move);
+    - explicit springs (``springs.implicit`` False: ``D' = D``, W' does not depend on K):
+      ``dW'/dK_j = 0``, ``dv_free'/dK_j = -h W' e_j (q_i - q_ref,j)``
 
     (docs/math.md section 6d)."""
     column = {name: j for j, name in enumerate(names)}
@@ -379,8 +381,12 @@ def damping_columns(
         dv_free[..., j] = -h * W[:, :, v] * v_free[:, v, None]
     for j, v in stiff:
         stretch = quant.q[:, springs.q_index[v]] - springs.reference[v]  # (B,)
-        dW[..., j] = -(h**2) * W[:, :, v, None] * W[:, None, v, :]
-        dv_free[..., j] = -h * W[:, :, v] * (h * v_free[:, v] + stretch)[:, None]
+        if springs.implicit:
+            dW[..., j] = -(h**2) * W[:, :, v, None] * W[:, None, v, :]
+            dv_free[..., j] = -h * W[:, :, v] * (h * v_free[:, v] + stretch)[:, None]
+        else:
+            dW[..., j] = 0.0
+            dv_free[..., j] = -h * W[:, :, v] * stretch[:, None]
     for j, v in refs:
         dW[..., j] = 0.0
         dv_free[..., j] = h * springs.stiffness[v] * W[:, :, v]

@@ -316,6 +316,16 @@ class Scene:
         default="stewart_trinkle",
         choices=FORMULATIONS,
     )
+    joint_springs: str = key(
+        'one of ["implicit", "explicit"]',
+        "How the step takes the models' joint springs (an MJCF joint's ``stiffness``, an SDF "
+        "joint's ``spring_stiffness``): ``\"implicit\"`` at the step's end, like the damping "
+        "(stable at any time step; it removes some of an oscillation's energy each step), or "
+        '``"explicit"`` at its start, as MuJoCo\'s default Euler integrator does (the same '
+        "step as MuJoCo's; stable while h^2 K / M < 4). See :mod:`drake_abs.contact.damping`",
+        default="implicit",
+        choices=("implicit", "explicit"),
+    )
 
     def __post_init__(self):
         where = f"scene {self.name!r}" if isinstance(self.name, str) else "scene"

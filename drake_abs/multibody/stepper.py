@@ -36,6 +36,7 @@ from drake_abs.multibody.joint_limits import (
     effort_limits,
     joint_damping,
     joint_springs,
+    spring_integration,
 )
 from drake_abs.multibody.parameters import (
     damping_columns,
@@ -148,8 +149,10 @@ class ComplementarityStepper:
             :mod:`drake_abs.contact.damping`).
         springs: apply the plant's joint springs (its ``RevoluteSpring`` and
             ``PrismaticSpring`` force elements: an MJCF joint's ``stiffness``, an SDF joint's
-            ``spring_stiffness``; :func:`~drake_abs.multibody.joint_limits.joint_springs`),
-            implicitly like the damping (:mod:`drake_abs.contact.damping`).
+            ``spring_stiffness``; :func:`~drake_abs.multibody.joint_limits.joint_springs`):
+            True or ``"implicit"`` takes them implicitly like the damping (stable at any h),
+            ``"explicit"`` at the step's start as MuJoCo's Euler integrator does
+            (:mod:`drake_abs.contact.damping`), False drops them.
         joint_friction: dry friction bound per velocity (nv,) (N m or N; 0 or None: none), e.g.
             the MJCF joints' ``frictionloss``
             (:attr:`drake_abs.multibody.builder.SceneModel.joint_friction`, which
@@ -173,13 +176,14 @@ class ComplementarityStepper:
         friction: str = "stewart_trinkle",
         joint_limits: bool = True,
         damping: bool = True,
-        springs: bool = True,
+        springs: bool | str = True,
         joint_friction: np.ndarray | None = None,
         compliance: ContactCompliance | None = None,
         **solver_options,
     ):
         check_gradient_mode(gradient)
         check_solver_options_given(solver_options)
+        spring_mode = spring_integration(springs)
         if friction not in FORMULATIONS:
             raise ValueError(f"friction must be one of {FORMULATIONS}; got {friction!r}")
         self.friction = friction
@@ -194,12 +198,14 @@ class ComplementarityStepper:
         self._clips = bool(np.isfinite(self.effort).any())  # per-step work only where needed
         self._set_joint_terms(
             joint_damping(plant) if damping else np.zeros(model.nv),
-            joint_springs(plant) if springs else JointSprings.none(model.nv),
+            joint_springs(plant, implicit=spring_mode != "explicit")
+            if spring_mode
+            else JointSprings.none(model.nv),
         )
         self._flags = {
             "joint_limits": bool(joint_limits),
             "damping": bool(damping),
-            "springs": bool(springs),
+            "springs": spring_mode,
         }
         self.joint_friction = JointFrictionRows.of(plant, joint_friction)
         if self.joint_friction.size and friction != "stewart_trinkle":

@@ -370,7 +370,8 @@ def test_suspended_half_cheetah_joints_follow_mujoco_with_springs():
         options = {"timestep": h, "integrator": "Euler", "contact": False}
         mj = MujocoStepper.from_gymnasium("HalfCheetah-v5", frame_skip=1, options=options)
         steps = int(round(0.6 / h))
-        ours, theirs = _rollout(sm.stepper(), x0, steps), _rollout(mj, x0, steps)
+        ours = _rollout(sm.stepper(springs="implicit"), x0, steps)
+        theirs = _rollout(mj, x0, steps)
         assert ours[:, 1].min() > 2.0  # in the air: no contact candidate near the ground
         assert np.abs(theirs[-1, legs]).max() < 0.05  # MuJoCo's legs swung back towards 0
         gaps[h] = np.abs(ours[:, legs] - theirs[:, legs]).max()
@@ -382,3 +383,79 @@ def test_suspended_half_cheetah_joints_follow_mujoco_with_springs():
     assert gaps[0.01] < 0.12 and gaps[0.001] < 0.015, gaps
     assert 7.0 < gaps[0.01] / gaps[0.001] < 13.0, gaps  # first order in h
     assert gap_without > 0.5, gap_without
+
+
+@pytest.mark.parametrize("dynamics", ["pinocchio", "drake"])
+def test_an_explicit_spring_steps_as_mujocos_euler(tmp_path, dynamics):
+    """springs="explicit": the spring torque at the step's start, the damping still implicit,
+    v+ = (m v + h (u - k (q - q_ref))) / (m + h d), q+ = q + h v+ (MuJoCo's Euler integrator);
+    it differs from the implicit step by the h^2 k in the denominator."""
+    sm, p = _slider(tmp_path, dynamics=dynamics)
+    stepper = sm.stepper(springs="explicit")
+    assert not stepper.springs.implicit and sm.stepper().springs.implicit
+    m, d, k, r = p["mass"], p["damping"], p["stiffness"], p["reference"]
+    x = np.array([0.9, -1.5])
+    for u in (0.0, 3.0, -7.0, 0.0, 12.0):
+        q, v = x
+        want_v = (m * v + H * (u - k * (q - r))) / (m + H * d)
+        x = stepper.step(x[None], np.array([u]), jacobians=False).x_next[0]
+        assert x[1] == pytest.approx(want_v, rel=1e-12, abs=1e-14)
+        assert x[0] == pytest.approx(q + H * want_v, rel=1e-12, abs=1e-14)
+    implicit = sm.stepper().step(np.array([[0.9, -1.5]]), np.zeros(1), jacobians=False)
+    explicit = stepper.step(np.array([[0.9, -1.5]]), np.zeros(1), jacobians=False)
+    assert abs(implicit.x_next[0, 1] - explicit.x_next[0, 1]) > 1e-3
+    # it survives pickling (Ray workers rebuild the same stepper)
+    again = pickle.loads(pickle.dumps(stepper))
+    assert not again.springs.implicit
+
+
+@pytest.mark.parametrize("dynamics", ["pinocchio", "drake"])
+def test_explicit_spring_jacobians_and_columns_match_central_differences(tmp_path, dynamics):
+    """dx+/dx, dx+/du and dx+/dtheta (stiffness, reference, damping, a mass) of the explicit
+    springs' step against central differences (dW'/dK = 0 there)."""
+    scene = _scene(tmp_path, ARM, "arm", body="lower", dynamics=dynamics)
+    stepper = build_scene_model(scene).stepper(springs="explicit")
+    # both springs stretched (an explicit stiffness column is 0 at its reference)
+    x, u = np.array([0.5, 0.1, -1.0, 2.0]), np.array([2.0, 1.0])
+    _fd_check(stepper, x, u)
+    values = dict(zip(stepper.parameter_names, stepper.parameter_values(), strict=True))
+    columns = ["stiffness[shoulder]", "stiffness[elbow]", "springref[elbow]", "damping[elbow]",
+               "mass[lower]"]  # fmt: skip
+    r = stepper.step(x[None], u, parameters=columns)
+    eps = 1e-6
+    for j, name in enumerate(columns):
+        plus = stepper.with_parameters({name: values[name] + eps})
+        assert not plus.springs.implicit  # with_parameters keeps the treatment
+        minus = stepper.with_parameters({name: values[name] - eps})
+        fd = (plus.step(x[None], u).x_next[0] - minus.step(x[None], u).x_next[0]) / (2 * eps)
+        np.testing.assert_allclose(r.dx_dtheta[0, :, j], fd, rtol=1e-6, atol=1e-9, err_msg=name)
+        assert np.abs(fd).max() > 1e-6, name
+
+
+def test_explicit_springs_follow_mujoco_to_rounding_in_the_air():
+    """The suspended HalfCheetah of the test above with springs="explicit": our step is then
+    MuJoCo's Euler step (springs explicit, damping and armature implicit), so the legs follow
+    MuJoCo's to rounding, where the implicit springs differ by 0.093 rad at 10 ms."""
+    pytest.importorskip("gymnasium")
+    pytest.importorskip("mujoco")
+    from drake_abs.reference.mujoco_plant import MujocoStepper
+
+    q0 = np.array([0.0, 5.0, 0.05, 0.4, -0.4, 0.3, -0.5, 0.5, -0.3])
+    x0 = np.concatenate([q0, np.zeros(9)])
+    sm = build_scene_model("gym_half_cheetah")
+    options = {"timestep": 0.01, "integrator": "Euler", "contact": False}
+    mj = MujocoStepper.from_gymnasium("HalfCheetah-v5", frame_skip=1, options=options)
+    theirs = _rollout(mj, x0, 60)
+    assert not sm.stepper().springs.implicit  # the shipped scene's choice
+    ours = _rollout(sm.stepper(springs="explicit"), x0, 60)
+    implicit = _rollout(sm.stepper(springs="implicit"), x0, 60)
+    assert np.abs(ours - theirs).max() < 1e-6, np.abs(ours - theirs).max()
+    assert np.abs(implicit[:, 3:9] - theirs[:, 3:9]).max() > 0.05
+
+
+def test_a_spring_treatment_that_is_not_one_is_refused(tmp_path):
+    sm, _ = _slider(tmp_path)
+    with pytest.raises(ValueError, match="springs must be True, False, 'implicit' or 'explicit'"):
+        sm.stepper(springs="semi")
+    with pytest.raises(ValueError, match="implicit must be True or False"):
+        JointSprings(np.ones(1), np.zeros(1), np.zeros(1, dtype=int), implicit="yes")

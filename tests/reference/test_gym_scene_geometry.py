@@ -77,3 +77,36 @@ def test_the_lowest_candidate_is_mujocos_lowest_geom(scene, env_id):
         theirs.append(_lowest_surface(model, data) - MARGIN_IN_RADIUS.get(scene, 0.0))
         ours.append(sm.contact_model.distances(q[None])[0].min() + sm.scene.ground_height)
     np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-8)
+
+
+def _combined_friction(model, geom: int, floor: int) -> float:
+    """MuJoCo's sliding friction of a contact between ``geom`` and ``floor`` at equal priority:
+    the larger of the two geoms' (every gym file here has priority 0 and no explicit pair)."""
+    assert model.geom_priority[geom] == model.geom_priority[floor] == 0
+    return float(max(model.geom_friction[geom, 0], model.geom_friction[floor, 0]))
+
+
+@pytest.mark.parametrize(("scene", "env_id"), SCENES)
+def test_every_candidate_has_mujocos_friction_against_the_floor(scene, env_id):
+    """Each candidate's friction coefficient is MuJoCo's for its body's geom against the floor.
+    The HalfCheetah's file gives every geom, the floor included, 0.4: a scene with 1.0 (as ours
+    had) gives its policies traction that MuJoCo's HalfCheetah does not have."""
+    sm = build_scene_model(scene)
+    model = gymnasium.make(env_id).unwrapped.model
+    floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    assert floor >= 0 and model.npair == 0
+    colliding = [g for g in range(model.ngeom) if g != floor and (
+                 model.geom_contype[g] & model.geom_conaffinity[floor]
+                 or model.geom_conaffinity[g] & model.geom_contype[floor])]  # fmt: skip
+    combined = {_combined_friction(model, g, floor) for g in colliding}
+    ours = {c.friction for c in sm.scene.contacts}
+    assert ours == combined, (ours, combined)
+    checked = 0
+    for contact in sm.scene.contacts:  # by body, where the body has its MuJoCo name
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, contact.body)
+        geoms = [g for g in colliding if model.geom_bodyid[g] == body]
+        if body < 0 or not geoms:
+            continue
+        assert contact.friction in {_combined_friction(model, g, floor) for g in geoms}, contact
+        checked += 1
+    assert checked >= 1
