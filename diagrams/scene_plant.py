@@ -20,6 +20,7 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_abs.contact.unconverged import OnUnconverged
 from drake_abs.multibody.builder import build_scene_model, check_stepper_keywords
 from drake_abs.multibody.scene import Scene
+from drake_abs.multibody.scene_floating_base import with_floating_base
 from drake_abs.systems import ComplementarityPlant
 
 
@@ -28,6 +29,7 @@ def AddComplementarityPlantSceneGraph(
     scene: Scene | str | Path,
     *,
     on_unconverged: OnUnconverged = "drop",
+    floating_base: str | None = None,
     plant_name: str = "plant",
     scene_graph_name: str = "scene_graph",
     **stepper_options,
@@ -39,6 +41,15 @@ def AddComplementarityPlantSceneGraph(
         builder: the diagram builder.
         scene: a :class:`Scene`, a shipped scene's name (e.g. ``"box_push"``) or a YAML path.
         on_unconverged: see :class:`~drake_abs.systems.ComplementarityPlant`.
+        floating_base: None (default): each model's free root body floats as its scene entry
+            says (``ModelSpec.floating_base``, ``"euler"`` unless set: q = (x, y, z, yaw,
+            pitch, roll), v their rates). ``"quaternion"``: every free root body on Drake's
+            ``QuaternionFloatingJoint``, q = (qw, qx, qy, qz, x, y, z), v = (angular,
+            translational velocity in the world), as a MultibodyPlant's default (``"euler"``:
+            every one on the chain). The scene's ``initial_state`` is carried over to the new
+            coordinates (same body poses and velocities:
+            :func:`~drake_abs.multibody.scene_floating_base.with_floating_base`). A URDF
+            ``floating`` joint is a quaternion joint either way; a welded model has none.
         plant_name, scene_graph_name: the systems' names in the diagram.
         stepper_options: passed to :meth:`~drake_abs.multibody.builder.SceneModel.stepper`
             (``smoothing``, ``gradient``, ``activation_distance``, ``friction``, ...), overriding
@@ -54,6 +65,8 @@ def AddComplementarityPlantSceneGraph(
     if not isinstance(scene, Scene):
         scene = Scene.load(scene)
     check_stepper_keywords(stepper_options, scene, "AddComplementarityPlantSceneGraph")
+    if floating_base is not None:
+        scene = with_floating_base(scene, floating_base)
     model = build_scene_model(scene)
     scene_graph = builder.AddNamedSystem(scene_graph_name, SceneGraph())
     plant = ComplementarityPlant(

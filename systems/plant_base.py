@@ -81,7 +81,8 @@ class ComplementarityPlantBase:
         self._step_cache = self.DeclareCacheEntry(
             description="the complementarity step from the current state",
             value_producer=ValueProducer(
-                allocate=lambda: AbstractValue.Make((None, None, None, 1.0)), calc=self._CalcStep
+                allocate=lambda: AbstractValue.Make((None, None, None, 1.0, None)),
+                calc=self._CalcStep,
             ),
             prerequisites_of_calc={self.all_sources_ticket()},
         )
@@ -140,16 +141,19 @@ class ComplementarityPlantBase:
         value.set_value(self._step_values(x, u, s, m))
 
     def _step_values(self, x, u, s, m):
-        """``(x_next, impulse, mu, converged)`` of the step from (x, u) under the parameters
-        (s, m); under AutoDiffXd with the derivatives chained (the ``mu`` output's are zero
-        where the stepper does not form them)."""
+        """``(x_next, impulse, mu, converged, friction_impulse)`` of the step from (x, u) under
+        the parameters (s, m); under AutoDiffXd with the derivatives chained (the ``mu``
+        output's are zero where the stepper does not form them). ``friction_impulse`` is the
+        stepper's (nc, 3) in double (N s, world frame; values only), or None where its step has
+        none (an LCS)."""
         if not any(autodiff.is_autodiff(a) for a in (x, u, s, m)):
             self._check_finite(x, u)
             stepper = self._stepper_for(np.asarray(s, float), np.asarray(m, float))
             r = stepper.step(
                 np.asarray(x, float)[None], np.asarray(u, float)[None], jacobians=False
             )
-            return r.x_next[0], r.impulse[0], r.mu[0], bool(np.all(r.converged))
+            friction = None if r.friction_impulse is None else r.friction_impulse[0]
+            return r.x_next[0], r.impulse[0], r.mu[0], bool(np.all(r.converged)), friction
         (xv, uv, sv, mv), (gx, gu, gs, gm) = autodiff.split([x, u, s, m])
         self._check_finite(xv, uv)
         model, smooth = bool(np.any(gm)), bool(np.any(gs))
@@ -175,14 +179,18 @@ class ComplementarityPlantBase:
             autodiff.join(v, derivative.get(n, np.zeros((v.shape[0], k))))
             for v, n in ((r.x_next, "dx"), (r.impulse, "dimpulse"), (r.mu, "dmu"))
         )
-        return x_next, impulse, mu, bool(np.all(r.converged))
+        return x_next, impulse, mu, bool(np.all(r.converged)), r.friction_impulse
+
+    def _name(self) -> str:
+        """How messages name this plant: its family (``ComplementarityPlant``, not the scalar
+        type's class) and its name in a diagram where it has one."""
+        plant = type(self).__name__.split("_")[0]
+        return f"{plant} {self.get_name()!r}" if self.get_name() else plant
 
     def _check_finite(self, x, u) -> None:
         """``ValueError`` naming the first entry of the discrete state x or of the actuation
         input u that is not finite (its index and value), before the step is taken."""
-        plant = type(self).__name__.split("_")[0]  # the family's name, not the scalar type's
-        if self.get_name():
-            plant = f"{plant} {self.get_name()!r}"
+        plant = self._name()
         check_finite_batch(np.asarray(x, float)[None], "x", batched=False,
                            what=f"{plant}: the discrete state ")  # fmt: skip
         check_finite_batch(np.asarray(u, float)[None], "u", batched=False,

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.geometry import (
     Box,
+    GeometryId,
     ProximityProperties,
     Rgba,
     SceneGraph,
@@ -27,6 +28,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_abs.multibody.builder import add_scene_models
+from drake_abs.multibody.drake_dynamics import PointContact
 from drake_abs.multibody.scene import Scene
 
 GROUND_RGBA = Rgba(0.45, 0.52, 0.58, 1.0)
@@ -99,3 +101,40 @@ def make_geometry_plant(
         plant.RegisterCollisionGeometry(world, X, thick, "ground", proximity)
     plant.Finalize()
     return plant
+
+
+def contact_geometry_ids(
+    plant: MultibodyPlant, inspector, contacts
+) -> list[tuple[GeometryId | None, GeometryId | None]]:
+    """Per contact candidate (``stepper.model.contacts``), the SceneGraph ids of the proximity
+    geometry :func:`make_geometry_plant` registered for it: ``(ground, contact sphere)`` for a
+    point candidate against the ground (the sphere on its body at its point, drawn for a listed
+    point), each None where there is none (the sphere of a candidate from collision shapes,
+    the ground of a plant made with ``ground=False``, both of a body-body pair).
+
+    Args:
+        plant: a plant from :func:`make_geometry_plant`.
+        inspector: its SceneGraph's ``model_inspector()``.
+        contacts: the candidates.
+    """
+    ground = None
+    for gid in plant.GetCollisionGeometriesForBody(plant.world_body()):
+        if inspector.GetName(gid).split("::")[-1] == "ground":
+            ground = gid
+    out = []
+    for c in contacts:
+        if not isinstance(c, PointContact):
+            out.append((None, None))
+            continue
+        instance = plant.GetModelInstanceByName(c.model_instance) if c.model_instance else None
+        body = (plant.GetBodyByName(c.body, instance) if instance is not None
+                else plant.GetBodyByName(c.body))  # fmt: skip
+        sphere = None
+        for gid in plant.GetCollisionGeometriesForBody(body):
+            name = inspector.GetName(gid).split("::")[-1]
+            at = inspector.GetPoseInFrame(gid).translation()
+            if name.startswith("contact_") and np.allclose(at, c.p_BC, rtol=0, atol=1e-12):
+                sphere = gid
+                break
+        out.append((ground, sphere))
+    return out
