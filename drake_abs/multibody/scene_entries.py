@@ -76,9 +76,9 @@ class ModelSpec:
     file: str = key(
         "a model file: package://<package>/<path> (packages: drake_abs, example-robot-data, "
         "<robot>_description, gymnasium) or a path on disk",
-        'URDF, SDF or MJCF, used as published (README, "Model files as published"); a path on '
-        "disk is absolute or relative to the working directory. Packages and the older "
-        "prefixes: :mod:`drake_abs.multibody.packages`",
+        'URDF, SDF or MJCF, used as published (docs/howto/own_robot.md, "Model files as '
+        'published"); a path on disk is absolute or relative to the working directory. '
+        "Packages and the older prefixes: :mod:`drake_abs.multibody.packages`",
     )
     name: str | None = key(
         f"{_OPTIONAL_TEXT}: the model instance's name", "Default: the file's", default=None
