@@ -49,7 +49,7 @@ from pydrake.multibody.plant import MultibodyPlant, PointPairContactInfo
 from pydrake.multibody.tree import JacobianWrtVariable
 
 from drake_abs.multibody.drake_dynamics import ContactModelBase, PointContact
-from drake_abs.multibody.geometry_contacts import PairContact, pair_geometry, pair_tangents
+from drake_abs.multibody.geometry_contacts import PairContact, pair_geometry
 
 
 @dataclass(frozen=True)
@@ -104,20 +104,6 @@ def _body(plant: MultibodyPlant, name: str, model: str | None):
     return (
         plant.GetBodyByName(name, instance) if instance is not None else plant.GetBodyByName(name)
     )
-
-
-def _pair_friction(model: ContactModelBase, friction: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """A pair candidate's friction impulse in the world (3,) from the step's: the stepper writes
-    every frictional candidate's tangential impulse as its coefficients times the *ground's*
-    tangent directions (``ComplementarityStepper._scatter``), while a pair's rows are along
-    :func:`~drake_abs.multibody.geometry_contacts.pair_tangents` of its own normal ``n``. Both
-    sets come from one construction (``cos a t1 + sin a t2``), so the coefficients on the
-    ground's (t1, t2) carry over to the pair's."""
-    t1 = model.tangents[0]
-    t2 = np.cross(model.normal, t1)
-    p1 = np.asarray(pair_tangents(n, model.cone.directions)[0], float)
-    p2 = np.cross(n, p1)
-    return (friction @ t1) * p1 + (friction @ t2) * p2
 
 
 def point_contact_results(
@@ -194,7 +180,7 @@ def point_contact_results(
             )
             n, p_A, p_B = (np.asarray(a, dtype=float) for a in (n, p_A, p_B))
             # the rows are n . (v_A - v_B): the impulses act on A, their opposite on B
-            on_a = impulse[i] * n + _pair_friction(model, friction[i], n)
+            on_a = impulse[i] * n + friction[i]  # the step's friction is on A, in the world
             f_B = -on_a / h
             relative = velocity(B, p_B) - velocity(A, p_A)
             nhat_BA = n

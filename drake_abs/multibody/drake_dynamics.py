@@ -533,6 +533,29 @@ class ContactModelBase(ABC):
     def _one(self, q, v, u, active, derivatives: bool, kinematics=None) -> dict:
         """The quantities of one state (the fields of StepQuantities but q and v)."""
 
+    def tangent_directions(self, q: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """The friction directions (B, n, k, 3) in the world of the candidates ``index`` (n,)
+        at positions ``q`` (B, nq): the ground's :attr:`tangents` for a point candidate; for a
+        pair candidate, those of its own contact normal at q (the directions of its ``Jt`` rows,
+        :func:`~drake_abs.multibody.geometry_contacts.pair_tangents`)."""
+        q = np.asarray(q, dtype=float)
+        index = np.asarray(index, dtype=int).reshape(-1)
+        out = np.broadcast_to(self.tangents, (len(q), index.size, *self.tangents.shape)).copy()
+        pairs = [(j, int(i)) for j, i in enumerate(index) if int(i) in self._pair_bodies_d]
+        if not pairs:
+            return out
+        plant = self.plant
+        if getattr(self, "_directions_context", None) is None:
+            self._directions_context = self.new_context()
+        ctx = self._directions_context
+        for b, qb in enumerate(q):
+            plant.SetPositions(ctx, qb)
+            for j, i in pairs:
+                A, B = self._pair_bodies_d[i]
+                n = pair_geometry(self.contacts[i], *_pose(plant, ctx, A), *_pose(plant, ctx, B))[1]
+                out[b, j] = pair_tangents(np.asarray(n, dtype=float), self.tangents.shape[0])
+        return out
+
     def distances(self, q: np.ndarray) -> np.ndarray:
         """Signed distances (B, nc) in m of every contact candidate, in double (affine in q, and
         evaluated so, for a plant with :attr:`affine` quantities)."""

@@ -429,7 +429,9 @@ class ComplementarityStepper:
         Returns:
             a :class:`~drake_abs.contact.step.Step` over the nc contact candidates: ``impulse``
             is each candidate's normal impulse, ``friction_impulse`` its tangential impulse
-            (B, nc, 3), ``active`` which candidates were in the LCP.
+            in the world (B, nc, 3) (N s; on the body for a ground contact, on body A for a
+            pair candidate, whose normal impulse acts along its own normal), ``active`` which
+            candidates were in the LCP.
         """
         if (parameters or smoothing_parameters) and not jacobians:
             raise ValueError("parameters=True and smoothing_parameters=True need jacobians=True")
@@ -702,7 +704,7 @@ class ComplementarityStepper:
                     f"the dynamics provider's derivatives have {r.dx_du.shape[-1]} input "
                     f"columns after (q, v); the model has nu = {nu}"
                 )
-            self._scatter(out, rows, idx, lidx, fidx, cone, r, jacobians)
+            self._scatter(out, rows, idx, lidx, fidx, cone, r, jacobians, q[rows])
         return out
 
     def _repair(self, q, v, u, active, out, jacobians: bool, parameters: tuple) -> None:
@@ -743,11 +745,13 @@ class ComplementarityStepper:
             for key, value in sub.items():
                 out[key][rows] = value
 
-    def _scatter(self, out, rows, idx, lidx, fidx, cone, r, jacobians) -> None:
-        """Write one group's step into the batch outputs (rows: a slice or row indices). The
-        group's normal rows are its contacts ``idx``, then its joint-limit rows ``lidx``, then
-        its joint-friction rows ``fidx``; its tangent rows, the frictional contacts', then the
-        joint frictions'."""
+    def _scatter(self, out, rows, idx, lidx, fidx, cone, r, jacobians, q) -> None:
+        """Write one group's step into the batch outputs (rows: a slice or row indices; q: the
+        rows' positions at the step's start). The group's normal rows are its contacts ``idx``,
+        then its joint-limit rows ``lidx``, then its joint-friction rows ``fidx``; its tangent
+        rows, the frictional contacts', then the joint frictions'. A friction impulse is its
+        coefficients times its rows' directions: the ground's tangents, or a pair candidate's
+        own (the impulse on its body A)."""
         nc_g, nt, _ = cone.sizes()
         k = idx.size  # the group's contact rows; its limit rows follow them
         nl = lidx.size
@@ -771,7 +775,7 @@ class ComplementarityStepper:
             ("impulse", idx, r.lam[:, :k]),
             ("limit_impulse", lidx, r.lam[:, k : k + nl]),
             ("mu", idx, r.mu[:, :k]),
-            ("friction_impulse", fr, beta[:, : fr.size] @ self.model.tangents),
+            ("friction_impulse", fr, self._friction_vectors(beta[:, : fr.size], fr, q)),
             ("joint_friction_impulse", fidx, self.joint_friction.impulses(beta[:, fr.size :])),
         ]
         if jacobians:
@@ -786,6 +790,14 @@ class ComplementarityStepper:
                 out[key][:, cols] = value
             else:
                 out[key][np.ix_(rows, cols)] = value
+
+    def _friction_vectors(self, beta: np.ndarray, fr: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """The friction impulses (B, n, 3) in the world of the frictional candidates ``fr``
+        (n,) from their coefficients ``beta`` (B, n, k) at the step's start positions q."""
+        if not getattr(self.model, "_pair_bodies_d", None):  # only ground contacts
+            return beta @ self.model.tangents
+        directions = self.model.tangent_directions(q, fr)  # (B, n, k, 3)
+        return np.einsum("bnk,bnkd->bnd", beta, directions)
 
 
 def _groups_by_active_set(active: np.ndarray) -> list[tuple]:

@@ -304,17 +304,22 @@ def test_a_pair_contacts_force_is_on_body_b_along_the_pairs_normal():
         assert corner.separation_speed() > 0.1
 
 
-def test_the_steps_pair_friction_is_in_the_grounds_tangent_basis():
-    """The convention ``contact_results._pair_friction`` undoes: ``Step.friction_impulse`` of a
-    pair candidate holds its coefficients times the ground's tangents (here along the pair's
-    normal, x, for a friction along y). If the stepper writes it in the pair's own tangents one
-    day, this fails: drop ``_pair_friction`` then."""
+def test_a_pair_candidates_friction_impulse_is_along_its_own_tangents():
+    """``Step.friction_impulse`` of a pair candidate is in the world, orthogonal to the pair's
+    own normal (here x, for a box pushed sideways along y): before it was written in the
+    ground's tangent basis and pointed along the pair's normal. Its size is the friction row
+    coefficients' (beta), so the rows and the vector agree."""
     model = build_scene_model("pusher_box")
     x = model.x0.copy()
     x[0], x[8], x[9] = 0.004, 1.0, 1.0
-    step = model.stepper().step(x[None], np.zeros((1, 2)), jacobians=False)
+    stepper = model.stepper()
+    step = stepper.step(x[None], np.zeros((1, 2)), jacobians=False)
     friction = step.friction_impulse[0, 8]
-    assert abs(friction[0]) > 1e-3 and abs(friction[1]) < 1e-12
+    assert abs(friction[1]) > 1e-3 and abs(friction[0]) < 1e-12  # along y, not along x
+    directions = stepper.model.tangent_directions(x[None, : model.contact_model.nq], [8])[0, 0]
+    np.testing.assert_allclose(directions @ np.array([1.0, 0.0, 0.0]), 0.0, atol=1e-12)
+    ground = stepper.model.tangent_directions(x[None, : model.contact_model.nq], [0])[0, 0]
+    np.testing.assert_array_equal(ground, stepper.model.tangents)
 
 
 def test_contact_force_visualizer_draws_the_contacts_in_a_simulation(meshcat):
