@@ -51,9 +51,15 @@ active set instead. That answer replaces the old one only if it passes the same 
 whatever their conditioning (pivoting is finite for P-matrices; the pivot budget
 ``PIVOTS_PER_CONTACT d + PIVOTS_EXTRA`` bounds the work), and Stewart-Trinkle friction problems
 that the interior point leaves (on gymnasium's HalfCheetah, 55 of 55 such steps in a test run:
-cond(F) near 1e17, the symmetric part indefinite). At mu > 0 the exact solution is only a
-start for the centring steps to mu: attempted, verified, often not enough (it is measured in
-``benchmarks/bench_lcp.py``). It costs nothing on problems that converge.
+cond(F) near 1e17, the symmetric part indefinite), and degenerate problems that only the
+lexicographic rule of Lemke's method finishes (the 40-row bimatrix game ``tobenna`` of the
+Siconos LCP collection, on which Drake 1.58's MobyLcpSolver reports success with ``w_i = -1``). An
+exact LCP whose solution has no interior point next to it (Pang's isolated-solution problem,
+d = 3, neither monotone nor P: no positive iterate can pass the test below) is answered by the
+crossover's exact vertex itself when the test passes there (:func:`_check_vertices`): its
+``lam`` and ``slack`` then hold exact zeros. At mu > 0 the exact solution is only a start for
+the centring steps to mu (a vertex never passes): attempted, verified, often not enough (it is
+measured in ``benchmarks/bench_lcp.py``). It costs nothing on problems that converge.
 
 Safeguards: steps keep the contacts still driving down in the wide neighbourhood
 ``lam_i s_i >= 1e-3 mean`` (backtracking), and a problem whose duality measure stalls drops the
@@ -122,8 +128,11 @@ class LCPResult:
     ``slack`` in the units of q.
 
     Attributes:
-        lam: (B, d) contact variables, > 0.
-        slack: (B, d) ``s = F lam + q`` as carried by the solver (primal residual within tol).
+        lam: (B, d) contact variables, > 0; >= 0 with exact zeros only in an exact (mu = 0)
+            answer that is the crossover's vertex (a ``polished`` problem whose LCP has no
+            interior point next to its solution, ``ipm._check_vertices``).
+        slack: (B, d) ``s = F lam + q`` as carried by the solver (primal residual within tol);
+            > 0, with the same exception as ``lam``.
         mu: (B, d) central-path value reached, ``lam * slack`` per contact.
         mu_target: (B, d) central-path value requested (after the exact floor was applied).
         iterations: (B,) interior-point iterations taken.
@@ -137,7 +146,9 @@ class LCPResult:
             :mod:`drake_abs.lcp.pivoting`).
         polished: (B,) True where the answer came from the crossover (the interior point alone
             did not converge); such an answer passed the same residual test as any other.
-        dlam_dq: (B, d, d) implicit Jacobian, or None unless ``jacobians=True``.
+        dlam_dq: (B, d, d) implicit Jacobian, or None unless ``jacobians=True``. It does not
+            exist at a vertex answer with a contact where ``lam_i = slack_i = 0``: such a
+            problem gets NaN Jacobians and is flagged ``NUMERICAL_FAILURE``.
         dlam_dmu: derivative with respect to mu in the form it was given: (B, d) for a scalar or
             one-per-problem mu, (B, d, d) for one mu per contact; None unless ``jacobians=True``.
             Derivatives are of the requested target; for ``mu`` below the exact floor the
@@ -427,8 +438,17 @@ def _solve(
                    out, pivots, polished)  # fmt: skip
     dlam_dq = dlam_dmu = None
     if jacobians:
+        # A contact with lam_i = s_i = 0 (a degenerate vertex answer, :func:`_check_vertices`)
+        # gives K a zero row: the Jacobians do not exist there. Such problems get NaN Jacobians,
+        # so the check below flags them, and a stand-in point keeps the division out of K.
+        undefined = np.any(lam_out + s_out <= 0.0, axis=1)
+        lam_j, s_j = lam_out, s_out
+        if undefined.any():
+            lam_j, s_j = lam_out.copy(), s_out.copy()
+            lam_j[undefined] = s_j[undefined] = 1.0
         with np.errstate(all="ignore"):
-            dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_out, s_out)
+            dlam_dq, dlam_dmu_pc = implicit_jacobians(F, lam_j, s_j)
+        dlam_dq[undefined] = dlam_dmu_pc[undefined] = np.nan
         dlam_dmu = dlam_dmu_pc if per_contact_mu else dlam_dmu_pc.sum(axis=-1)
         for arr in (dlam_dq, dlam_dmu):  # per problem (an explicit width: B may be 0)
             finite &= np.all(np.isfinite(arr.reshape(B, math.prod(arr.shape[1:]))), axis=1)
@@ -546,25 +566,37 @@ def _crossover(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone,
         if not failed.size:
             return
         D, _, _ = _scales(F3 if shared else F3[failed], shared, Q[failed])
-        rows, starts = [], []
+        rows, starts, vertices, only_vertex = [], [], [], []
         for k, b in enumerate(failed):
             found, spent = candidate(b, k, D)
             pivots[b] += spent
             if found is None or not found.ok:
                 continue
             lam0, s0 = central_start(found.lam, found.w, out[6][b])
+            vertex = (np.maximum(found.lam, 0.0), np.maximum(found.w, 0.0))
             if np.all(np.isfinite(lam0) & np.isfinite(s0) & (lam0 > 0) & (s0 > 0)):
                 rows.append(b)
                 starts.append((lam0, s0))
+                vertices.append(vertex)
+            else:  # no usable start next to it (under- or overflow): the vertex alone
+                only_vertex.append((b, vertex))
         if rows:
             _verify(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, out,
-                    polished, np.asarray(rows), starts)  # fmt: skip
+                    polished, np.asarray(rows), starts, vertices)  # fmt: skip
+        if only_vertex:
+            _check_vertices(F3, shared, Q, mu_full, exact_tol, tol, out, polished,
+                            np.asarray([b for b, _ in only_vertex]),
+                            [v for _, v in only_vertex])  # fmt: skip
 
 
 def _verify(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, out, polished,
-            rows, starts) -> None:  # fmt: skip
+            rows, starts, vertices) -> None:  # fmt: skip
     """Run the compiled iterations on the problems ``rows`` from ``starts`` ((lam0, s0) each);
-    an answer that converges replaces the one in ``out`` and is marked ``polished``."""
+    an answer that converges replaces the one in ``out`` and is marked ``polished``.
+
+    A problem whose iterations do not converge from its start is then checked at its exact
+    vertex itself (``vertices``: (lam, w) each, ``lam_i w_i = 0``, exact zeros allowed): the
+    compiled residual test with no iteration (:func:`_check_vertices`)."""
     lam0 = np.ascontiguousarray(np.stack([a for a, _ in starts]))
     s0 = np.ascontiguousarray(np.stack([b for _, b in starts]))
     sub_F = F3 if shared else F3[rows]
@@ -576,6 +608,47 @@ def _verify(F3, shared, Q, mu_full, exact_tol, tol, max_iterations, monotone, ou
     for arr, new in zip(out, again, strict=True):
         arr[rows[took]] = new[took]
     out[1][rows] = total
+    polished[rows[took]] = True
+    left = np.flatnonzero(~took)
+    if left.size:
+        _check_vertices(F3, shared, Q, mu_full, exact_tol, tol, out, polished, rows[left],
+                        [vertices[k] for k in left])  # fmt: skip
+
+
+def _check_vertices(F3, shared, Q, mu_full, exact_tol, tol, out, polished, rows,
+                    vertices) -> None:  # fmt: skip
+    """Accept an exact vertex ``(lam, w)`` of the crossover as the answer of problem ``rows[k]``
+    when it passes the solver's own test, ``residual <= tol`` of the module docstring, evaluated
+    by the compiled kernel at that point with no iteration.
+
+    This is for the exact LCPs that have no interior point next to their solution, so that no
+    strictly positive iterate can pass the test: Pang's isolated-solution problem (Siconos LCP
+    collection, d = 3: ``F = [[0, -1, -1], [1, 0, 0], [-1, 0, 0]], q = (0, -1, 1)``, unique
+    solution ``lam = (1, 0, 0), w = 0``), whose first row ``w_1 = -lam_2 - lam_3`` forces
+    ``lam_2 = lam_3 = w_1 = 0`` exactly: at any positive point the row's backward error is 1.
+    At the vertex the row residuals are roundoff and every ``lam_i w_i = 0``, which the test
+    accepts only when every target is at the exact floor (``|0 - mu_i| <= tol mu_i + gap_atol_i``
+    holds for ``mu_i = exact_tol^2`` and fails for any requested mu above it): a smoothed
+    (mu > 0) problem is never answered by a vertex. Such an answer has exact zeros in ``lam``
+    and ``slack`` (and ``mu = 0``); at a contact where both vanish the implicit Jacobians do not
+    exist, and a solve with ``jacobians=True`` flags that problem ``NUMERICAL_FAILURE``."""
+    lam0 = np.ascontiguousarray(np.stack([a for a, _ in vertices]))
+    s0 = np.ascontiguousarray(np.stack([b for _, b in vertices]))
+    sub_F = F3 if shared else F3[rows]
+    monotone = np.zeros(rows.size, dtype=bool)  # unused: no iteration is taken
+    check = solve(sub_F, shared, np.ascontiguousarray(Q[rows]),
+                  np.ascontiguousarray(mu_full[rows]), exact_tol, tol, 0, monotone, lam0, s0,
+                  True)  # fmt: skip
+    lam, s, prod, target = check[3], check[4], check[5], check[6]
+    representable = np.all(
+        np.isfinite(lam) & np.isfinite(s) & np.isfinite(prod) & np.isfinite(target)
+        & (lam >= 0) & (s >= 0), axis=1,
+    )  # fmt: skip
+    took = (check[0] == LCPStatus.CONVERGED) & representable
+    check[7][:] = representable  # the kernel's flag asks for lam, s > 0: zeros are exact here
+    for k, (arr, new) in enumerate(zip(out, check, strict=True)):
+        if k != 1:  # out[1] is the iterations: the vertex check takes none
+            arr[rows[took]] = new[took]
     polished[rows[took]] = True
 
 

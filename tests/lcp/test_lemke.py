@@ -111,3 +111,12 @@ def test_a_half_cheetah_exact_step_needs_lemke_and_is_then_solved(monkeypatch):
     assert valid(F, q, r.lam, rtol=1e-9)
     usable, z = moby(F, q)
     assert usable and valid(F, q, z)
+
+
+def test_lemke_stops_without_an_answer_when_the_tableau_overflows():
+    """Jacobi scaling of a matrix with entries 1e300 off a 1e-300 diagonal overflows: nothing is
+    returned (the crossover keeps the problem flagged), no exception."""
+    F = np.array([[1e-300, 1e300], [-1e300, 1e-300]])
+    with np.errstate(all="ignore"):
+        active, pivots = lemke_active_set(F, np.array([-1.0, -1.0]), max_pivots=10)
+    assert active is None and pivots == 0
