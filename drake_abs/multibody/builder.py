@@ -9,6 +9,7 @@ here is picklable: it is sent as its scene and settings and rebuilt where it is 
 
 This module is the top of the scene modules of :mod:`drake_abs.multibody`; each imports only
 those below it: :mod:`~drake_abs.multibody.packages` (package resolution),
+:mod:`~drake_abs.multibody.parser_messages` (Drake's parser warnings, reported once per file),
 :mod:`~drake_abs.multibody.model_files`, :mod:`~drake_abs.multibody.scene_entries`,
 :mod:`~drake_abs.multibody.parsing` (model files into a plant),
 :mod:`~drake_abs.multibody.contacts` (contact candidates), :mod:`~drake_abs.multibody.scene`.
@@ -20,7 +21,9 @@ from __future__ import annotations
 
 import difflib
 import functools
+import hashlib
 import sys
+from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -228,9 +231,39 @@ def _check_armature(model: PinocchioContactModel, plant: MultibodyPlant) -> None
         )
 
 
-#: Scene models rebuilt in this process from pickled steppers, by scene (as YAML text): a
-#: worker that receives several objectives of one scene parses its model files once.
-_REBUILT: dict[str, SceneModel] = {}
+#: Scene models built in this process by :func:`shared_scene_model`, most recently used last.
+_SHARED: OrderedDict[tuple, SceneModel] = OrderedDict()
+#: How many scene models :func:`shared_scene_model` keeps (the least recently used goes).
+SHARED_SCENE_MODELS = 16
+
+
+def shared_scene_model(scene: Scene) -> SceneModel:
+    """:func:`build_scene_model` of ``scene``, built once per process and shared: by the steppers
+    a worker rebuilds from pickles (several objectives of one scene) and by the tasks built on
+    a scene (:func:`drake_abs.tasks.locomotion.locomotion_task`, called for every method,
+    seed, environment and scoring run), so that each model file is parsed once, not once per
+    task (a test-size ``drake-abs experiment locomotion`` parsed each file 10 times).
+
+    The key is the scene (as YAML text) and the contents of its model files, so an edited file
+    is parsed again. What is shared is the finalized plant and the contact model; every stepper
+    made from it is its own (its settings, parameters and caches), and the contact model's
+    contexts are scratch space that each evaluation sets afresh, which sharing within one
+    process (one thread) allows. Callers that change a model in place must build their own
+    (:func:`build_scene_model`)."""
+    digests = []
+    for i, spec in enumerate(scene.models):
+        key = f"models[{i}].file"
+        path = resolve_model_file(spec, f"{scene.locate(key)}: {key}")
+        digests.append(hashlib.sha1(path.read_bytes()).hexdigest() if path.is_file() else "")
+    key = (scene.to_yaml(), *digests)
+    model = _SHARED.get(key)
+    if model is None:
+        model = build_scene_model(scene)
+        _SHARED[key] = model
+        while len(_SHARED) > SHARED_SCENE_MODELS:
+            _SHARED.popitem(last=False)
+    _SHARED.move_to_end(key)
+    return model
 
 
 def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
@@ -238,11 +271,9 @@ def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
     gradient, activation_distance, friction, joint_limits, damping, springs, joint_friction,
     compliance, solver options, and
     ``parameters``: the model parameters changed by
-    :meth:`~ComplementarityStepper.with_parameters`, ``{name: value}``)."""
-    key = scene.to_yaml()
-    model = _REBUILT.get(key)
-    if model is None:
-        model = _REBUILT.setdefault(key, build_scene_model(scene))
+    :meth:`~ComplementarityStepper.with_parameters`, ``{name: value}``), on the scene's
+    :func:`shared_scene_model`."""
+    model = shared_scene_model(scene)
     settings = dict(settings)
     parameters = settings.pop("parameters", None)
     stepper = ComplementarityStepper(model.contact_model, **settings)

@@ -57,6 +57,7 @@ from pydrake.multibody.tree import (
 )
 
 from drake_abs.multibody.joint_limits import joint_springs
+from drake_abs.multibody.parser_messages import drake_parser_messages, report_parser_messages
 
 _COLLISION = re.compile(r"<collision\b[^>]*?/>|<collision\b.*?</collision\s*>", re.DOTALL)
 _URDF_FILENAME = re.compile(r'(\bfilename\s*=\s*)(["\'])(.*?)\2')
@@ -227,22 +228,46 @@ def add_models(
     not shown (the caller builds them): ``(model instances, floating joints)``.
     ``collisions=False`` leaves the file's collision geometry out and draws STL visual meshes
     through OBJ copies (see the module docstring). For an MJCF file, ``mjcf`` (from
-    :func:`read_mjcf`) with a total mass has its ``settotalmass`` applied."""
+    :func:`read_mjcf`) with a total mass has its ``settotalmass`` applied.
+
+    Drake's parser warnings are held back and reported once per file and process, with what
+    drake-abs does about each ignored part
+    (:func:`~drake_abs.multibody.parser_messages.report_parser_messages`)."""
     path = Path(path)
     floating = floating_joints(path)
+    springs = friction = None
+    if mjcf is not None:
+        springs, friction = len(mjcf.springs), len(mjcf.frictionloss)
+    dropped = () if mjcf is None else mjcf.dropped
+    try:
+        with drake_parser_messages() as messages:
+            instances = _add_models(parser, path, floating, collisions, mjcf)
+    finally:  # also what a failed parse said
+        report_parser_messages(path, messages, springs=springs, friction=friction, dropped=dropped)
+    return instances, floating
+
+
+def _add_models(
+    parser: Parser,
+    path: Path,
+    floating: tuple[FloatingJoint, ...],
+    collisions: bool,
+    mjcf: MjcfInfo | None,
+):
+    """The parse of :func:`add_models`: the model instances."""
     if mjcf is not None and mjcf.total_mass is not None:
         text, kind = _mjcf_with_total_mass(path, mjcf.total_mass), "xml"
     elif collisions and not floating:
-        return parser.AddModels(str(path)), floating
+        return parser.AddModels(str(path))
     else:
         rewritten = _model_text(path, parser.package_map(), collisions=collisions)
         if rewritten is None:
-            return parser.AddModels(str(path)), floating
+            return parser.AddModels(str(path))
         text, kind = rewritten
     with tempfile.TemporaryDirectory(prefix="drake_abs_model_") as folder:
         copy = Path(folder) / f"{path.stem}.{kind}"  # absolute references only
         copy.write_text(text)
-        return parser.AddModels(str(copy)), floating
+        return parser.AddModels(str(copy))
 
 
 def add_models_without_collisions(parser: Parser, path: Path):

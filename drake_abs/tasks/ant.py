@@ -217,9 +217,9 @@ class ContactWrenches:
 
 def _rebuilt_wrenches(scene, bodies) -> ContactWrenches:
     """A :class:`ContactWrenches` rebuilt from its scene (unpickling; needs Drake)."""
-    from drake_abs.multibody.builder import build_scene_model  # Drake, only when rebuilding
+    from drake_abs.multibody.builder import shared_scene_model  # Drake, only when rebuilding
 
-    return ContactWrenches(build_scene_model(scene), bodies)
+    return ContactWrenches(shared_scene_model(scene), bodies)
 
 
 @dataclass(frozen=True)

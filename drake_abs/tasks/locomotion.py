@@ -627,7 +627,7 @@ def locomotion_task(
     """
     if name not in TASKS:
         raise ValueError(f"name must be one of {sorted(TASKS)}; got {name!r}")
-    from drake_abs.multibody.builder import build_scene_model  # Drake, only when building
+    from drake_abs.multibody.builder import shared_scene_model  # Drake, only when building
     from drake_abs.multibody.scene import Scene
     from drake_abs.multibody.stepper import SOLVER_OPTIONS
 
@@ -654,7 +654,9 @@ def locomotion_task(
     if substeps is None:
         substeps = max(1, int(np.ceil(dt / scene.time_step - 1e-9)))
     substeps = as_count(substeps, "substeps", minimum=1)
-    model = build_scene_model(replace(scene, time_step=dt / substeps))
+    # built once per process and scene: a run makes a task per method, seed and scoring, and
+    # each would parse the model file again (and repeat Drake's parser warnings)
+    model = shared_scene_model(replace(scene, time_step=dt / substeps))
     gears = np.array([a["gear"] for a in model.model_report()["actuators"]], dtype=float)
     inner = model.stepper(smoothing=smoothing, **stepper)
     nq, nv, nu = inner.sizes[:3]
