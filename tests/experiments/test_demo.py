@@ -7,8 +7,20 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from drake_abs.experiments.bouncing_ball import Config, frame_camera, report, run
+from drake_abs.experiments.bouncing_ball import (
+    Config,
+    abs_impulse_jump,
+    contact_impulse_curves,
+    figures,
+    frame_camera,
+    guide,
+    report,
+    run,
+    simulate,
+    step_jacobians,
+)
 from drake_abs.experiments.cli import main
+from drake_abs.experiments.outputs import pyplot
 
 
 @pytest.fixture(scope="module")
@@ -88,3 +100,62 @@ def test_cli_without_meshcat(tmp_path, capsys):
     assert f"results written to {tmp_path.resolve()}" in text
     assert "What to look at" in text and str(tmp_path.resolve() / "dvy_dx.png") in text
     assert (tmp_path / "vy_vs_x.png").exists() and not (tmp_path / "bouncing_ball.html").exists()
+
+
+def test_demo_summary_splits_the_stiffness_where_abs_and_exact_differ(demo):
+    """Over a whole rollout ABS's largest |dv_y+/dy| is exact contact's (1/h): in contact ABS
+    is exact contact (mu = 0). The summary reports the approach (z > 0), where they differ,
+    apart from the contact steps (issue 35, item 9)."""
+    _, summary = demo
+    cases = summary["cases"]
+    h = summary["config"]["time_step"]
+    exact, aware = cases["exact"], cases["abs_contact_aware"]
+    for case in (exact, aware):
+        assert case["max_abs_dvy_plus_dy_in_contact"] == pytest.approx(1 / h, rel=1e-9)
+        assert case["max_abs_dvy_plus_dy"] == case["max_abs_dvy_plus_dy_in_contact"]
+        assert case["steps_in_contact"] > 0
+    assert exact["max_abs_dvy_plus_dy_approaching"] < 1e-9  # no force at a distance
+    approach = aware["max_abs_dvy_plus_dy_approaching"]
+    assert 0.1 < approach < 0.5 / h  # smoothing acts before contact, far below 1/h
+    for mu in (1e-4, 1e-3, 1e-2):  # and less than barrier smoothing's, at any of its mu
+        assert approach < cases[f"bs_mu={mu:g}"]["max_abs_dvy_plus_dy_approaching"]
+    text = report(summary)
+    assert "approaching" in text and "in contact" in text
+    assert f"ABS's {approach:.3g} 1/s" in text and "is exact contact (mu = 0)" in text
+
+
+def test_abs_impulse_jumps_at_contact_by_the_stated_amount(demo):
+    """The contact-aware ABS impulse tends to sqrt(mu_max m / h) as z -> 0+ and is exact
+    contact's 0 at z = 0: the step the guide explains."""
+    _, summary = demo
+    config = Config(meshcat=False)
+    impulse = contact_impulse_curves(config, np.array([-1e-9, 0.0, 1e-9]))["abs_contact_aware"]
+    jump = abs_impulse_jump(config)
+    assert jump == pytest.approx(1.0)  # 1 N s with the defaults
+    assert impulse[2] == pytest.approx(jump, rel=1e-6)
+    assert impulse[1] < 1e-9 and impulse[0] == pytest.approx(1e-9 * config.mass / config.time_step)
+    assert "sqrt(mu_max m / h) = 1 N s" in guide(summary)
+
+
+def test_dvy_dx_symlog_axis_labels_negative_ticks():
+    config = Config(duration=0.6, meshcat=False)
+    trajectories = simulate(config)
+    jac = {
+        name: step_jacobians(config, trajectories[name], s) for name, s in config.cases().items()
+    }
+    figs = figures(config, trajectories, jac)
+    try:
+        ax = figs["dvy_dx"].axes[0]
+        assert ax.get_yscale() == "symlog"
+        figs["dvy_dx"].canvas.draw()
+        low, high = ax.get_ylim()
+        labels = {t.get_position()[1]: t.get_text() for t in ax.get_yticklabels()
+                  if low <= t.get_position()[1] <= high}  # fmt: skip
+        negative = {v: s for v, s in labels.items() if v < 0}
+        assert negative and all(s.startswith("\u2212") for s in negative.values()), labels
+        assert labels[-10.0] == "\u221210" and labels[0.0] == "0"  # -g / v_x = -9.81 is readable
+        assert any(v >= 100 and "10^{2}" in s for v, s in labels.items())  # the impact spike
+        assert all(labels.values())  # every tick labelled
+    finally:
+        for fig in figs.values():
+            pyplot().close(fig)
