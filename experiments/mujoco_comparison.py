@@ -68,13 +68,14 @@ WHY_THEY_DIFFER = (
     "allows slow creep under static load. Geometry: ours touches at the capsules' end spheres, "
     "which against the flat ground is the whole capsule (its nearest point is an end); MuJoCo "
     "also collides the Hopper's links with each other. Springs: the HalfCheetah's joint springs "
-    "are explicit in MuJoCo and implicit here, which alone separates the two by about 0.09 rad "
-    "at this 10 ms step (less at smaller steps). SAP is soft too (convex, "
+    "are explicit on both sides (its scene's joint_springs: explicit, MuJoCo's Euler step: in "
+    "the air the two agree to rounding; implicit springs would separate them by about 0.09 rad "
+    "at this 10 ms step). SAP is soft too (convex, "
     "compliant point contact), between the two. Once the torques make the models walk or fall "
     "over, small differences grow: the open-loop RMS is a measure of that divergence, not of an "
     "error of either side. ours_soft is our step with MuJoCo's contact law (the file's solref, "
     "solimp and margins as a regularised LCP): it sinks and springs back as MuJoCo does; what "
-    "remains is the springs' integration, the cone (its friction rows stay hard; a planar scene "
+    "remains is the cone (its friction rows stay hard; a planar scene "
     "has 2 of MuJoCo's 4 pyramid edges) and the joint limits, which stay hard."
 )
 
