@@ -102,7 +102,13 @@ def ComplementarityPlant_(T):
                 files' default positions, at rest; ``AddComplementarityPlantSceneGraph`` gives
                 the scene's ``initial_state``). :meth:`GetDefaultPositions` and
                 :meth:`GetDefaultVelocities` return it; ``SetDefaultContext(context)`` restores
-                it (and the built parameter values) in a Context.
+                it (and the built parameter values) in a Context. A contact candidate deeper
+                below the ground than the stepper's ``penetration_tolerance`` there raises
+                :class:`~drake_abs.multibody.unmodelled_geometry.InitialPenetrationWarning`,
+                and collision geometry that no candidate covers deeper than its
+                ``unmodelled_tolerance``
+                :class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledPenetrationWarning`
+                (as after every step: the stepper's option ``check_unmodelled``).
         """
 
         def _construct(
@@ -115,6 +121,7 @@ def ComplementarityPlant_(T):
             converter=None,
             _geometry=None,
             _contact_ids=None,
+            _check_initial=True,
         ):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(stepper, ComplementarityStepper):
@@ -132,6 +139,9 @@ def ComplementarityPlant_(T):
                 q0 = plant.GetPositions(plant.CreateDefaultContext())
                 initial_state = np.concatenate([q0, np.zeros(nv)])
             self.initial_state = np.asarray(initial_state, dtype=float)
+            if _check_initial and self.initial_state.shape == (nq + nv,):
+                # a start inside the ground, or with geometry no candidate covers below it
+                stepper.check_state(self.initial_state, "ComplementarityPlant")
             self._declare_plant(
                 T, nq + nv, nu, nc, self.initial_state, stepper.smoothing.parameter_values(),
                 stepper.parameter_values(), self.time_step,
@@ -182,7 +192,7 @@ def ComplementarityPlant_(T):
             Impl._construct(
                 self, other.stepper, other.on_unconverged, initial_state=other.initial_state,
                 converter=converter, _geometry=other._geometry,
-                _contact_ids=other._contact_ids,
+                _contact_ids=other._contact_ids, _check_initial=False,
             )  # fmt: skip
 
         # --- the MultibodyPlant habits: sizes, state, defaults, the plant -------------------

@@ -8,15 +8,21 @@ from drake_abs.multibody.builder import SceneModel, build_scene_model, make_step
 from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.scene import ContactSpec, ModelSpec, Scene, shipped_scenes
 from drake_abs.multibody.stepper import ComplementarityStepper, StepOverflowWarning
+from drake_abs.multibody.unmodelled_geometry import (
+    InitialPenetrationWarning,
+    UnmodelledPenetrationWarning,
+)
 
 __all__ = [
     "PACKAGE_DIR",
     "ComplementarityStepper",
     "ContactSpec",
+    "InitialPenetrationWarning",
     "ModelSpec",
     "Scene",
     "SceneModel",
     "StepOverflowWarning",
+    "UnmodelledPenetrationWarning",
     "build_scene_model",
     "make_stepper",
     "shipped_scenes",

@@ -49,13 +49,19 @@ from drake_abs.multibody.parsing import add_model_specs, resolve_model_file
 from drake_abs.multibody.pinocchio_dynamics import PinocchioContactModel
 from drake_abs.multibody.scene import Scene, shipped_scenes
 from drake_abs.multibody.scene_compliance import scene_compliance
-from drake_abs.multibody.stepper import SOLVER_OPTIONS, ComplementarityStepper
+from drake_abs.multibody.stepper import (
+    PENETRATION_TOL,
+    SOFT_PENETRATION_TOL,
+    SOLVER_OPTIONS,
+    ComplementarityStepper,
+)
+from drake_abs.multibody.unmodelled_geometry import UnmodelledGeometry, warn_initial_penetration
 
 #: The keyword arguments :meth:`SceneModel.stepper` accepts: its own overrides of the scene's
 #: settings, the switches of :class:`ComplementarityStepper` and the solver's options.
 STEPPER_KEYWORDS = (
     "smoothing", "activation_distance", "gradient", "friction",
-    "joint_limits", "damping", "springs", "joint_friction", *SOLVER_OPTIONS,
+    "joint_limits", "damping", "springs", "joint_friction", "check_unmodelled", *SOLVER_OPTIONS,
 )  # fmt: skip
 
 #: A scene setting that a stepper keyword overrides under another name.
@@ -130,6 +136,26 @@ class SceneModel:
         complementarity rows (:mod:`drake_abs.multibody.joint_friction`)."""
         return scene_joint_friction(self.scene, self.plant)
 
+    @functools.cached_property
+    def unmodelled_geometry(self) -> UnmodelledGeometry:
+        """The collision geometry of the scene's models that its contact candidates do not
+        cover (:class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledGeometry`; read from
+        the model files when first needed, once per process), which the scene's steppers
+        check after every step (their option ``check_unmodelled``)."""
+        return UnmodelledGeometry.of_scene(self.scene, self.plant, self.contact_model.contacts)
+
+    def suggest_contacts(self, bodies=None, tolerance: float = PENETRATION_TOL):
+        """Contact entries that model the collision geometry of ``bodies`` (names, as
+        :class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledPenetrationWarning` gives
+        them; default: every body whose geometry no candidate covers to within ``tolerance``,
+        m) from its shapes, a
+        :class:`~drake_abs.multibody.unmodelled_geometry.SuggestedContacts`: ``.entries``
+        (mappings of the scene YAML's ``contacts`` schema), ``.yaml`` (text to paste under a
+        scene file's ``contacts:``) and ``.added_to(scene)`` (the scene with them). See
+        :meth:`~drake_abs.multibody.unmodelled_geometry.UnmodelledGeometry.suggest_contacts`
+        for the points of each shape."""
+        return self.unmodelled_geometry.suggest_contacts(bodies, tolerance)
+
     def model_report(self) -> dict:
         """What the plant holds of the scene's model files: per joint its coordinates, limits,
         damping, armature, spring and dry friction (``frictionloss``, N m or N), per actuator
@@ -181,6 +207,7 @@ class SceneModel:
             **{"joint_friction": self.joint_friction, **solver_options, "springs": springs},
         )
         stepper.scene, stepper.rebuild = self.scene, rebuild_stepper  # picklable
+        stepper.unmodelled = self.unmodelled_geometry
         return stepper
 
 
@@ -278,6 +305,7 @@ def rebuild_stepper(scene: Scene, settings: dict) -> ComplementarityStepper:
     parameters = settings.pop("parameters", None)
     stepper = ComplementarityStepper(model.contact_model, **settings)
     stepper.scene, stepper.rebuild = model.scene, rebuild_stepper
+    stepper.unmodelled = model.unmodelled_geometry
     if parameters:
         stepper = stepper.with_parameters(parameters)
     return stepper
@@ -346,7 +374,11 @@ def _closest(name: str, names: list[str]) -> str:
 
 def build_scene_model(scene: Scene | str | Path) -> SceneModel:
     """The dynamics plant, contact model and initial state of ``scene`` (a :class:`Scene`, a
-    shipped scene's name, or a YAML path)."""
+    shipped scene's name, or a YAML path). An initial state (the scene's ``initial_state``, else
+    the model files' default pose) with a contact candidate deeper below the ground than the
+    penetration tolerance (1 cm; 5 cm with soft contact) raises
+    :class:`~drake_abs.multibody.unmodelled_geometry.InitialPenetrationWarning`, naming each
+    such candidate and its depth."""
     if not isinstance(scene, Scene):
         scene = Scene.load(scene)
     plant = MultibodyPlant(0.0)
@@ -383,6 +415,9 @@ def build_scene_model(scene: Scene | str | Path) -> SceneModel:
                 f"(qw, qx, qy, qz); got norm {norm:.6g}"
             )
         q0[s : s + 4] /= norm
+    soft = getattr(scene.compliance, "kind", "hard") != "hard"
+    tolerance = SOFT_PENETRATION_TOL if soft else PENETRATION_TOL
+    warn_initial_penetration(model, q0, tolerance, f"scene {scene.name!r}", scene, stacklevel=2)
     return SceneModel(scene, plant, model, q0, v0)
 
 

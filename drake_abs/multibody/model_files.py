@@ -187,11 +187,13 @@ def floating_joints(path: str | Path) -> tuple[FloatingJoint, ...]:
     return tuple(out)
 
 
-def _model_text(path: Path, package_map: PackageMap, *, collisions: bool) -> tuple[str, str] | None:
+def _model_text(
+    path: Path, package_map: PackageMap, *, collisions: bool, obj_meshes: bool = False
+) -> tuple[str, str] | None:
     """A URDF or SDF file's text with relative file references made absolute and URDF floating
     joints removed; without ``collisions``, also without ``<collision>`` elements and with STL
-    meshes replaced by OBJ copies. With its file type (``"urdf"`` or ``"sdf"``); None for other
-    formats."""
+    meshes replaced by OBJ copies (with ``obj_meshes`` also with them). With its file type
+    (``"urdf"`` or ``"sdf"``); None for other formats."""
     kind = path.suffix.lower().lstrip(".")
     if kind not in ("urdf", "sdf"):
         return None
@@ -201,7 +203,7 @@ def _model_text(path: Path, package_map: PackageMap, *, collisions: bool) -> tup
     base = path.resolve().parent
 
     def rewrite(ref: str) -> str:
-        return _rewrite_reference(ref, base, package_map, meshes=not collisions)
+        return _rewrite_reference(ref, base, package_map, meshes=obj_meshes or not collisions)
 
     if kind == "urdf":
         text = _URDF_FLOATING.sub("", text)
@@ -222,13 +224,21 @@ def visual_only_model_text(
 
 
 def add_models(
-    parser: Parser, path: str | Path, *, collisions: bool = True, mjcf: MjcfInfo | None = None
+    parser: Parser,
+    path: str | Path,
+    *,
+    collisions: bool = True,
+    mjcf: MjcfInfo | None = None,
+    obj_meshes: bool = False,
 ):
     """``parser.AddModels(path)``, and the file's :func:`floating_joints`, which the parser is
     not shown (the caller builds them): ``(model instances, floating joints)``.
     ``collisions=False`` leaves the file's collision geometry out and draws STL visual meshes
-    through OBJ copies (see the module docstring). For an MJCF file, ``mjcf`` (from
-    :func:`read_mjcf`) with a total mass has its ``settotalmass`` applied.
+    through OBJ copies (see the module docstring); ``obj_meshes=True`` keeps the collision
+    geometry and replaces a URDF's or SDF's STL meshes by OBJ copies, so that a plant registered
+    with a SceneGraph takes them (it computes the convex hull of OBJ, VTK and glTF meshes only;
+    :mod:`drake_abs.multibody.unmodelled_geometry` reads the hulls). For an MJCF file,
+    ``mjcf`` (from :func:`read_mjcf`) with a total mass has its ``settotalmass`` applied.
 
     Drake's parser warnings are held back and reported once per file and process, with what
     drake-abs does about each ignored part
@@ -241,7 +251,7 @@ def add_models(
     dropped = () if mjcf is None else mjcf.dropped
     try:
         with drake_parser_messages() as messages:
-            instances = _add_models(parser, path, floating, collisions, mjcf)
+            instances = _add_models(parser, path, floating, collisions, mjcf, obj_meshes)
     finally:  # also what a failed parse said
         report_parser_messages(path, messages, springs=springs, friction=friction, dropped=dropped)
     return instances, floating
@@ -253,14 +263,17 @@ def _add_models(
     floating: tuple[FloatingJoint, ...],
     collisions: bool,
     mjcf: MjcfInfo | None,
+    obj_meshes: bool = False,
 ):
     """The parse of :func:`add_models`: the model instances."""
     if mjcf is not None and mjcf.total_mass is not None:
         text, kind = _mjcf_with_total_mass(path, mjcf.total_mass), "xml"
-    elif collisions and not floating:
+    elif collisions and not floating and not obj_meshes:
         return parser.AddModels(str(path))
     else:
-        rewritten = _model_text(path, parser.package_map(), collisions=collisions)
+        rewritten = _model_text(
+            path, parser.package_map(), collisions=collisions, obj_meshes=obj_meshes
+        )
         if rewritten is None:
             return parser.AddModels(str(path))
         text, kind = rewritten

@@ -33,7 +33,9 @@ def resolve_model_file(spec: ModelSpec, where: str = "") -> Path:
     return resolve_package_file(spec.file, where)
 
 
-def _parse(parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where: str):
+def _parse(
+    parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where: str, obj_meshes=False
+):
     """Parse one model file: its model instances, with the bodies its URDF ``floating`` joints
     name given a quaternion floating joint of that name, at the joint's origin (see
     :func:`add_floating_base_chains`); an MJCF file (``.xml``) checked and completed by
@@ -50,7 +52,9 @@ def _parse(parser: Parser, path: Path, collisions: bool, spec: ModelSpec, where:
             f"{where}: ignore and keyframe apply to MuJoCo files (.xml) only; {spec.file!r} is "
             "not one"
         )
-    instances, floating = add_models(parser, path, collisions=collisions, mjcf=mjcf)
+    instances, floating = add_models(
+        parser, path, collisions=collisions, mjcf=mjcf, obj_meshes=obj_meshes
+    )
     plant = parser.plant()
     if mjcf is not None:
         apply_mjcf(plant, instances[0], mjcf, spec.keyframe, where=f"{where} ({spec.file})")
@@ -70,12 +74,14 @@ def add_model_specs(
     parser: Parser | None = None,
     *,
     collisions: bool = True,
+    obj_meshes: bool = False,
 ) -> None:
     """Parse ``models`` (a scene's) into ``plant`` (not finalized), with welds, actuators and
     floating bases (a quaternion floating joint where a URDF declares a ``floating`` joint to
     the world, :func:`add_floating_base_chains` for the other free bodies); ``collisions=False``
     leaves the files' collision geometry out (and draws STL visuals through OBJ copies; see
-    :mod:`drake_abs.multibody.model_files`).
+    :mod:`drake_abs.multibody.model_files`); ``obj_meshes=True`` keeps it, with STL meshes
+    replaced by OBJ copies, for a plant registered with a SceneGraph.
 
     ``where`` starts every error message: a text (``"scene 'box_push'"``), or a function of the
     scene key the error is about (``"models[0].file"``) such as
@@ -89,7 +95,7 @@ def add_model_specs(
         entry = f"{locate(f'models[{i}]')}: models[{i}]"
         key = f"models[{i}].file"
         path = resolve_model_file(spec, where=f"{locate(key)}: {key}")
-        instances = _parse(parser, path, collisions, spec, entry)
+        instances = _parse(parser, path, collisions, spec, entry, obj_meshes)
         instance = instances[0]
         if spec.name:
             plant.RenameModelInstance(instance, spec.name)

@@ -48,6 +48,10 @@ from drake_abs.multibody.parameters import (
     parameter_vector,
     with_values,
 )
+from drake_abs.multibody.unmodelled_geometry import (
+    UnmodelledGeometry,
+    warn_initial_penetration,
+)
 
 #: how deep (m) a candidate left out of a step's LCP may end below the ground before the step
 #: is solved again with it (see ``ComplementarityStepper._repair``)
@@ -107,6 +111,23 @@ class StepOverflowWarning(UserWarning):
     Coriolis terms at very large joint velocities); its ``converged`` flag is False."""
 
 
+def check_unmodelled_option(value) -> bool | float:
+    """``check_unmodelled`` checked: True, False, or a tolerance (m, a number >= 0; ``inf``:
+    off); ``ValueError`` naming it otherwise."""
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if (
+        not isinstance(value, int | float | np.integer | np.floating)
+        or np.isnan(value)
+        or value < 0
+    ):
+        raise ValueError(
+            "check_unmodelled must be True, False or a tolerance in m (a number >= 0); got "
+            f"{value!r}"
+        )
+    return float(value)
+
+
 def check_solver_options_given(options: Mapping) -> None:
     """Refuse, when a stepper is built rather than at its first step, a solver option that is
     not one of :data:`SOLVER_OPTIONS` (a misspelt or misplaced setting would otherwise fail
@@ -116,7 +137,7 @@ def check_solver_options_given(options: Mapping) -> None:
         raise ValueError(
             f"unknown stepper option(s) {unknown}: a stepper takes smoothing, gradient, "
             "activation_distance, friction, joint_limits, damping, springs, joint_friction, "
-            f"compliance and the solver's {', '.join(SOLVER_OPTIONS)}"
+            f"compliance, check_unmodelled and the solver's {', '.join(SOLVER_OPTIONS)}"
         )
     for name in ("tol", "exact_tol"):
         if name in options:
@@ -164,6 +185,15 @@ class ComplementarityStepper:
             :class:`~drake_abs.contact.compliance.ContactCompliance`), or None (default) for
             hard contact. A soft candidate has rows only while its distance is below its
             margin (as MuJoCo's contacts), and a step may end with it below the ground.
+        check_unmodelled: after every step, measure how deep the collision geometry that no
+            contact candidate covers lies below the ground, and warn
+            (:class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledPenetrationWarning`,
+            once per body and stepper, naming the body, the depth and the contact entries that
+            would model it) where it is deeper than the tolerance: True (default) with
+            :attr:`penetration_tolerance` (1 cm with hard contact, 5 cm with soft), a number
+            for another tolerance (m), False (or ``inf``) for no check. Only a stepper built
+            from a scene has the geometry (:attr:`unmodelled`); the check costs 1 to 4 % of a
+            step (:mod:`drake_abs.multibody.unmodelled_geometry`).
         solver_options: passed to the interior-point solver.
     """
 
@@ -179,9 +209,11 @@ class ComplementarityStepper:
         springs: bool | str = True,
         joint_friction: np.ndarray | None = None,
         compliance: ContactCompliance | None = None,
+        check_unmodelled: bool | float = True,
         **solver_options,
     ):
         check_gradient_mode(gradient)
+        self.check_unmodelled = check_unmodelled_option(check_unmodelled)
         check_solver_options_given(solver_options)
         spring_mode = spring_integration(springs)
         if friction not in FORMULATIONS:
@@ -230,6 +262,14 @@ class ComplementarityStepper:
         #: the model parameters :meth:`with_parameters` changed from the scene's, ``{name:
         #: value}`` (pickled with the settings)
         self._parameters: dict[str, float] = {}
+        #: The scene's collision geometry that no contact candidate covers
+        #: (:class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledGeometry`, read from the
+        #: model files when first needed), which ``check_unmodelled`` measures after every
+        #: step; set with :attr:`scene` (None: no check).
+        self.unmodelled: UnmodelledGeometry | None = None
+        #: the bodies already warned about (once per body; shared with this stepper's copies,
+        #: :meth:`with_smoothing`, :meth:`with_parameters`)
+        self._unmodelled_warned: set[str] = set()
 
     def _set_joint_terms(self, damping: np.ndarray, springs: JointSprings) -> None:
         """Hold the joint damping (nv,) and springs, and what the provider is passed of them
@@ -259,7 +299,7 @@ class ComplementarityStepper:
         settings = dict(
             smoothing=self.smoothing, gradient=self.gradient,
             activation_distance=self.activation_distance, friction=self.friction,
-            **self._flags, **self.solver_options,
+            check_unmodelled=self.check_unmodelled, **self._flags, **self.solver_options,
         )  # fmt: skip
         if self.compliance is not None:
             settings["compliance"] = self.compliance
@@ -387,6 +427,46 @@ class ComplementarityStepper:
         :data:`PENETRATION_TOL` with hard contact, :data:`SOFT_PENETRATION_TOL` with soft."""
         return PENETRATION_TOL if self.compliance is None else SOFT_PENETRATION_TOL
 
+    @property
+    def unmodelled_tolerance(self) -> float | None:
+        """How deep (m) collision geometry that no candidate covers may lie below the ground
+        after a step before a warning
+        (:class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledPenetrationWarning`): the
+        option ``check_unmodelled`` (:attr:`penetration_tolerance` for True); None when the
+        check is off or the stepper has no geometry (:attr:`unmodelled`)."""
+        if self.unmodelled is None or self.check_unmodelled is False:
+            return None
+        if self.check_unmodelled is True:
+            return self.penetration_tolerance
+        return None if np.isinf(self.check_unmodelled) else float(self.check_unmodelled)
+
+    def check_state(self, x, where: str | None = None) -> None:
+        """Warn about a state this stepper starts from (one state (nq + nv,)): its contact
+        candidates deeper than :attr:`penetration_tolerance` below the ground
+        (:class:`~drake_abs.multibody.unmodelled_geometry.InitialPenetrationWarning`, naming
+        each candidate, its scene entry and its depth) and, with ``check_unmodelled``, its
+        uncovered collision geometry deeper than :attr:`unmodelled_tolerance`
+        (:class:`~drake_abs.multibody.unmodelled_geometry.UnmodelledPenetrationWarning`, once
+        per body). ``where`` starts the first message (default: the scene's name).
+        :class:`~drake_abs.systems.ComplementarityPlant` calls it with its initial state."""
+        nq = self.sizes[0]
+        q = np.asarray(x, dtype=float).reshape(-1)[:nq]
+        if where is None:
+            where = "ComplementarityStepper" if self.scene is None else f"scene {self.scene.name!r}"
+        warn_initial_penetration(
+            self.model, q, self.penetration_tolerance, where, self.scene, stacklevel=2
+        )
+        self._check_unmodelled(q[None], stacklevel=3)
+
+    def _check_unmodelled(self, q: np.ndarray, stacklevel: int = 3) -> None:
+        """Warn once per body whose uncovered collision geometry is deeper than
+        :attr:`unmodelled_tolerance` below the ground at some state of q (B, nq)."""
+        tolerance = self.unmodelled_tolerance
+        if tolerance is not None:
+            self.unmodelled.check(
+                q, self.model.ground, tolerance, self._unmodelled_warned, stacklevel
+            )
+
     def penetration(self, x) -> np.ndarray:
         """How deep (m) each state of x (B, nq + nv) (or one state (nq + nv,)) is inside the
         ground: the largest depth of a contact candidate below its surface (its signed distance
@@ -494,6 +574,8 @@ class ComplementarityStepper:
                 StepOverflowWarning,
                 stacklevel=2,
             )
+        if self.unmodelled is not None:  # geometry no candidate covers, below the ground
+            self._check_unmodelled(out["x_next"][:, :nq])
         return Step(active=active[:, :nc], theta_names=names, **out)
 
     def _inputs(self, x, u) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:

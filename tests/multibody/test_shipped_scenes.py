@@ -37,7 +37,7 @@ SIZES = {
     "box_push": (3, 3, 1, 4),
     "hopper": (5, 5, 2, 1),
     "half_cheetah": (9, 9, 6, 4),
-    "solo12_drop": (18, 18, 12, 4),
+    "solo12_drop": (18, 18, 12, 12),  # four feet, the base's 8 bounding-box corners
     "go1_drop": (18, 18, 12, 4),  # example-robot-data's Unitree Go1 as published
     # gymnasium's MuJoCo files as published (their rollouts: tests/multibody/test_model_files.py)
     "gym_hopper": (6, 6, 3, 5),
@@ -199,7 +199,8 @@ def test_solo12_lands_on_four_feet_and_stands():
     xs, impulses, _ = rollout("solo12_drop")
     q, v = xs[-1, :18], xs[-1, 18:]
     assert impulses[:15].max() < 1e-12  # falls freely at first
-    assert impulses[-20:].min() > 1e-3  # then stands on all four feet
+    assert impulses[-20:, :4].min() > 1e-3  # then stands on all four feet
+    assert impulses[:, 4:].max() < 1e-12  # never on its base
     assert 0.22 < q[2] < 0.26
     np.testing.assert_allclose(q[[0, 1, 3, 4, 5]], 0, atol=1e-3)  # level, not drifting
     assert np.abs(v[:6]).max() < 0.05
