@@ -535,7 +535,7 @@ class ContactModelBase(ABC):
 
     def tangent_directions(self, q: np.ndarray, index: np.ndarray) -> np.ndarray:
         """The friction directions (B, n, k, 3) in the world of the candidates ``index`` (n,)
-        at positions ``q`` (B, nq): the ground's :attr:`tangents` for a point candidate; for a
+        at positions ``q`` (B, nq): the ground's ``tangents`` for a point candidate; for a
         pair candidate, those of its own contact normal at q (the directions of its ``Jt`` rows,
         :func:`~drake_abs.multibody.geometry_contacts.pair_tangents`)."""
         q = np.asarray(q, dtype=float)
