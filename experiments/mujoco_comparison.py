@@ -29,7 +29,6 @@ references), and our input, the joint torque, is MuJoCo's ctrl times the motor's
 from __future__ import annotations
 
 import json
-import logging
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -255,7 +254,6 @@ def run(config: Config | None = None, out: str | Path | None = None) -> dict:
     results/mujoco-comparison); ``summary["files"]`` lists it (absolute path)."""
     config = config or Config()
     out = results_dir(NAME, out)
-    logging.getLogger("drake").setLevel(logging.ERROR)  # the MJCF parser's unsupported tags
     import mujoco
 
     summary = {

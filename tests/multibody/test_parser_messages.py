@@ -33,8 +33,11 @@ MODEL = """<mujoco model="slider">
 
 @pytest.fixture
 def fresh_process(monkeypatch):
-    """As in a new process: nothing reported yet, no scene model shared yet."""
+    """As in a new process: nothing reported yet, no scene model shared yet, and Drake's logger
+    at its default level (another test in the same worker may have raised it)."""
     monkeypatch.setattr(parser_messages, "_REPORTED", {})
+    drake_logger = logging.getLogger("drake")
+    monkeypatch.setattr(drake_logger, "level", logging.NOTSET)
     monkeypatch.setattr(builder, "_SHARED", OrderedDict())
 
 
