@@ -170,6 +170,7 @@ def compare_scene(name: str, config: Config) -> dict:
     last = plant.get_joint_actuator(actuators[-1]).joint()
     motor, factor = LIMIT_HIT[name]
     hit = plant.get_joint_actuator(actuators[motor]).joint()
+    k_hit = float(sm.stepper().springs.stiffness[hit.velocity_start()])  # N m / rad, 0: none
     context, torso = plant.CreateDefaultContext(), plant.GetBodyByName("torso")
     x0 = np.asarray(sm.x0, float)
     head = max(2, int(round(0.2 / scene.time_step)))
@@ -224,6 +225,12 @@ def compare_scene(name: str, config: Config) -> dict:
             else:
                 past = hit.position_lower_limits()[0] - qs[:, hit.position_start()]
             e["limit_joint_max_past_limit"] = past.max()
+            # the load the joint's spring takes beyond the limit (N m s): where a soft limit lets
+            # the joint overshoot, its spring pushes back harder than at the limit, and the
+            # limit itself stops that much less (springs at the step's start, as MuJoCo's Euler)
+            e["limit_spring_excess_impulse"] = (
+                scene.time_step * k_hit * np.maximum(0.0, past[:-1]).sum()
+            )
             if side != "ours":
                 e["rms_q_vs_ours"] = _rms(qs, x_ours[:, :nq])
                 e["rms_q_vs_ours_first_0.2s"] = _rms(qs[:head], x_ours[:head, :nq])

@@ -65,8 +65,13 @@ def test_joint_limit_hit_hard_against_soft(summary):
         assert hit["ours"]["limit_impulse_total"] > 0
         # MuJoCo's limits are soft (solreflimit): the joint overshoots, by more than 1 cm-rad
         assert hit["mujoco"]["limit_joint_max_past_limit"] > 0.01
-        # both limits stop the same torque: same total limit impulse to 15 %
-        ratio = hit["mujoco"]["limit_impulse_total"] / hit["ours"]["limit_impulse_total"]
+        # both limits stop the same torque: same total limit impulse to 15 %, once MuJoCo's is
+        # credited with what the joint's spring takes beyond its soft limit (the HalfCheetah's
+        # back foot, 120 N m/rad: without it the ratio is 0.82; the Hopper's joint has none)
+        # a hard limit: past it by < 1e-6 rad (above), so < h K steps 1e-6 = 7e-5 N m s here
+        assert hit["ours"]["limit_spring_excess_impulse"] < 1e-4
+        mujoco = hit["mujoco"]["limit_impulse_total"] + hit["mujoco"]["limit_spring_excess_impulse"]
+        ratio = mujoco / hit["ours"]["limit_impulse_total"]
         assert abs(ratio - 1) < 0.15
 
 
