@@ -4,22 +4,12 @@ roll-pitch-yaw chain."""
 
 import numpy as np
 import pytest
+from floating_scenes import TOSSED
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_abs.diagrams import AddComplementarityPlantSceneGraph
 from drake_abs.multibody import Scene
-
-#: a free box thrown up, pitched and spinning (in the air for the whole test)
-TOSSED = {
-    "name": "tossed_box",
-    "models": [{"file": "package://drake_abs/models/box_floating.sdf"}],
-    "contacts": [{"body": "box", "geometry": "collision", "friction": 0.5}],
-    "initial_state": {
-        "q": [0.1, -0.2, 0.5, 0.4, -0.3, 0.2],
-        "v": [0.5, 0.1, -0.2, 1.0, 2.0, -1.0],
-    },
-}
 
 
 def _box_motion(floating_base: str, duration: float):

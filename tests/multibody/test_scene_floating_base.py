@@ -3,21 +3,11 @@ joints, its initial state carried over (every body's pose and spatial velocity k
 
 import numpy as np
 import pytest
+from floating_scenes import TOSSED
 from pydrake.multibody.tree import BodyIndex
 
 from drake_abs.multibody import Scene, build_scene_model
 from drake_abs.multibody.scene_floating_base import with_floating_base
-
-#: a free box, pitched and spinning: every coordinate of the base moves
-TOSSED = {
-    "name": "tossed_box",
-    "models": [{"file": "package://drake_abs/models/box_floating.sdf"}],
-    "contacts": [{"body": "box", "geometry": "collision", "friction": 0.5}],
-    "initial_state": {
-        "q": [0.1, -0.2, 0.5, 0.4, -0.3, 0.2],
-        "v": [0.5, 0.1, -0.2, 1.0, 2.0, -1.0],
-    },
-}
 
 
 def _motion(scene: Scene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
