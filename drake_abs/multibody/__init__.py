@@ -7,7 +7,11 @@ Start from ``make_stepper("box_push")`` or ``build_scene_model(Scene.load("box_p
 from drake_abs.multibody.builder import SceneModel, build_scene_model, make_stepper
 from drake_abs.multibody.packages import PACKAGE_DIR
 from drake_abs.multibody.scene import ContactSpec, ModelSpec, Scene, shipped_scenes
-from drake_abs.multibody.stepper import ComplementarityStepper, StepOverflowWarning
+from drake_abs.multibody.stepper import (
+    ComplementarityStepper,
+    ExplicitSpringWarning,
+    StepOverflowWarning,
+)
 from drake_abs.multibody.unmodelled_geometry import (
     InitialPenetrationWarning,
     UnmodelledPenetrationWarning,
@@ -21,6 +25,7 @@ __all__ = [
     "ModelSpec",
     "Scene",
     "SceneModel",
+    "ExplicitSpringWarning",
     "StepOverflowWarning",
     "UnmodelledPenetrationWarning",
     "build_scene_model",

@@ -111,6 +111,37 @@ class StepOverflowWarning(UserWarning):
     Coriolis terms at very large joint velocities); its ``converged`` flag is False."""
 
 
+class ExplicitSpringWarning(UserWarning):
+    """Joint springs taken explicitly (``springs="explicit"``) past their stability bound at
+    the model's time step: ``h^2 K_j W_jj >= 4`` at the plant's default configuration (W the
+    inverse mass matrix, armature included), where the explicit step's oscillation grows each
+    step, as MuJoCo's Euler integrator's does. Take them implicitly or reduce the time step."""
+
+
+def warn_unstable_explicit_springs(model: ContactModelBase, springs: JointSprings) -> None:
+    """Warn (:class:`ExplicitSpringWarning`) when an explicit spring of ``model`` is past the
+    stability bound of its step (above), naming each velocity and its ``h^2 K W_jj``."""
+    if springs.implicit or not springs.active:
+        return
+    plant = model.plant
+    q0 = plant.GetPositions(plant.CreateDefaultContext())[None]
+    quant = model.quantities(
+        q0, np.zeros((1, model.nv)), np.zeros((1, model.nu)), np.arange(0), derivatives=False
+    )
+    bound = model.h**2 * springs.stiffness * np.diag(np.asarray(quant.W, dtype=float)[0])
+    bad = np.flatnonzero(bound >= 4.0)
+    if bad.size:
+        listed = ", ".join(f"velocity {j}: {bound[j]:.3g}" for j in bad)
+        warnings.warn(
+            f"explicit joint springs past their stability bound h^2 K W_jj < 4 at h = "
+            f"{model.h} s ({listed}): their oscillation grows each step; take them "
+            "implicitly (springs='implicit', scene joint_springs: implicit) or reduce the "
+            "time step",
+            ExplicitSpringWarning,
+            stacklevel=3,
+        )
+
+
 def check_unmodelled_option(value) -> bool | float:
     """``check_unmodelled`` checked: True, False, or a tolerance (m, a number >= 0; ``inf``:
     off); ``ValueError`` naming it otherwise."""
@@ -234,6 +265,7 @@ class ComplementarityStepper:
             if spring_mode
             else JointSprings.none(model.nv),
         )
+        warn_unstable_explicit_springs(model, self.springs)
         self._flags = {
             "joint_limits": bool(joint_limits),
             "damping": bool(damping),

@@ -459,3 +459,21 @@ def test_a_spring_treatment_that_is_not_one_is_refused(tmp_path):
         sm.stepper(springs="semi")
     with pytest.raises(ValueError, match="implicit must be True or False"):
         JointSprings(np.ones(1), np.zeros(1), np.zeros(1, dtype=int), implicit="yes")
+
+
+def test_explicit_springs_past_their_stability_bound_are_warned_of(tmp_path):
+    """h^2 k / m = 2500 (the stiff slider above): explicit springs would grow each step, and the
+    stepper says so when it is built; the implicit ones, and the HalfCheetah's explicit ones
+    (h^2 K W_jj about 0.2 at most), build silently."""
+    import warnings
+
+    from drake_abs.multibody.stepper import ExplicitSpringWarning
+
+    h, m, k = 0.05, 1.0, 1e6
+    sm, _ = _slider(tmp_path, "stiff", time_step=h, mass=m, damping=0.0, stiffness=k, reference=0.0)
+    with pytest.warns(ExplicitSpringWarning, match=r"velocity 0: 2\.5e\+03"):
+        sm.stepper(springs="explicit")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ExplicitSpringWarning)
+        sm.stepper()  # implicit
+        build_scene_model("gym_half_cheetah").stepper()  # explicit, within the bound
