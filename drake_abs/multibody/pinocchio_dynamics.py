@@ -52,6 +52,7 @@ from drake_abs.multibody.drake_dynamics import (
     apply_spatial_inertias,
 )
 from drake_abs.multibody.pinocchio_free_joints import FreeJointCoordinates
+from drake_abs.multibody.tree_kinematics import TreeKinematics
 
 
 def _se3(X) -> pin.SE3:
@@ -221,6 +222,10 @@ class PinocchioContactModel(ContactModelBase):
         self._carriers = [int(j) for j in joints]
         self._slot = np.array([joints.index(jid) for jid, _ in self._points], dtype=np.int64)
         self._p_J = np.array([p for _, p in self._points], dtype=float).reshape(-1, 3)
+        #: compiled batched placements of the carrying joints (None with a free flyer: then
+        #: they are read from pinocchio's data after its kinematics)
+        self._tree = TreeKinematics.of(self.pin_model) if self._coords is None else None
+        self._carrier_ids = np.array(self._carriers, dtype=np.int64)
 
     def _pin_q(self, q: np.ndarray) -> np.ndarray:
         """Pinocchio's configuration at Drake's q (the same vector without free joints)."""
@@ -238,16 +243,22 @@ class PinocchioContactModel(ContactModelBase):
     def _batch_centres(self, H: np.ndarray) -> np.ndarray:
         """Every contact centre in the world (B, nc, 3) from the carrying joints' placements
         H (B, nj, 4, 4)."""
-        X = H[:, self._slot]  # (B, nc, 4, 4)
-        return np.einsum("bcij,cj->bci", X[..., :3, :3], self._p_J) + X[..., :3, 3]
+        return _points_in_world(np.ascontiguousarray(H), self._slot, self._p_J)
 
-    def _distances(self, q: np.ndarray) -> np.ndarray:
-        model, data = self.pin_model, self.pin_data
+    def _placements(self, q: np.ndarray) -> np.ndarray:
+        """The carrying joints' world placements H (B, nj, 4, 4) at Drake's q (B, nq)."""
         q = np.asarray(q, float)
+        if self._tree is not None:
+            return self._tree.placements(q, self._carrier_ids)
+        model, data = self.pin_model, self.pin_data
         H = np.empty((len(q), len(self._carriers), 4, 4))
         for b, qb in enumerate(q):
             pin.forwardKinematics(model, data, self._pin_q(qb))
             self._read_placements(H, b, data)
+        return H
+
+    def _distances(self, q: np.ndarray) -> np.ndarray:
+        H = self._placements(q)
         return self._batch_centres(H) @ self.normal - self._radius - self.ground.height
 
     def quantities(
@@ -303,7 +314,7 @@ class PinocchioContactModel(ContactModelBase):
         W = np.empty((B, nv, nv))
         a = np.empty((B, nv))
         J = np.empty((B, 6, nv))
-        H = np.empty((B, len(self._carriers), 4, 4))
+        H = self._placements(q)  # no free flyer on this path: the compiled kinematics
         if derivatives:
             da_dq = np.empty((B, nv, nv))
             da_dv = np.empty((B, nv, nv))
@@ -313,12 +324,10 @@ class PinocchioContactModel(ContactModelBase):
                 )
                 a[b] = data.ddq
                 J[b] = np.reshape(data.J, (6, nv))
-                self._read_placements(H, b, data)
         else:
             for b in range(B):
                 pin.computeJointJacobians(model, data, q[b])
                 J[b] = np.reshape(data.J, (6, nv))
-                self._read_placements(H, b, data)
                 a[b] = pin.aba(model, data, q[b], v[b], tau[b])
                 W[b] = pin.computeMinverse(model, data, q[b])
         upper = np.triu(W)  # pinocchio fills the upper triangle of M^-1
@@ -480,6 +489,22 @@ def _contact_rows(
         np.ascontiguousarray(J)[None], paths, ranks, derivatives, J.shape[1],
     )  # fmt: skip
     return tuple(x[0] for x in out)
+
+
+@nb.njit(cache=True)
+def _points_in_world(H, slot, p_J):
+    """X (B, nc, 3): X[b, c] = R p_J[c] + p with (R, p) = H[b, slot[c]] (B, nj, 4, 4)."""
+    B, nc = H.shape[0], slot.size
+    X = np.empty((B, nc, 3))
+    for b in range(B):
+        for c in range(nc):
+            k = slot[c]
+            for i in range(3):
+                X[b, c, i] = (
+                    H[b, k, i, 0] * p_J[c, 0] + H[b, k, i, 1] * p_J[c, 1]
+                    + H[b, k, i, 2] * p_J[c, 2] + H[b, k, i, 3]
+                )  # fmt: skip
+    return X
 
 
 @nb.njit(cache=True)
